@@ -1,0 +1,36 @@
+"""taichi_hsdem: level-set DEM particles in a Hele-Shaw flow, clogging constrictions.
+
+The method, in the order of the package: scene (:mod:`.scene`) -> shapes and walls
+(:mod:`.shapes`, :mod:`.walls`, :mod:`.placement`) -> resolved set-up
+(:mod:`.resolve`) -> contact (:mod:`.contact`, :mod:`.neighbors`) -> fluid
+(:mod:`.fluid`) -> coupling (:mod:`.coupling`) -> integration (:mod:`.integrate`)
+-> the run and its observables (:mod:`.simulation`) -> statistics (:mod:`.stats`)
+-> output and rendering (:mod:`.output`, :mod:`.render`).
+
+Examples
+--------
+>>> import taichi_hsdem as th
+>>> scene = th.load_scene("scenes/hourglass24.toml", ["run.t_end=1.0"])  # doctest: +SKIP
+>>> result = th.run(scene)                                               # doctest: +SKIP
+>>> result.summary["mean_escapees"]                                      # doctest: +SKIP
+"""
+__version__ = "0.1.0"
+
+from .scene import Scene, SceneError, load_scene, scene_to_toml  # noqa: E402
+from .simulation import Result, RunError, Simulation  # noqa: E402
+
+
+def run(scene, overrides=(), progress=None) -> "Result":
+    """Load (if needed) and run a scene; return its :class:`Result`.
+
+    ``scene`` is a :class:`Scene`, a path to a TOML file or a dict.
+    """
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, overrides)
+    elif overrides:
+        raise TypeError("overrides apply to a path or dict; use load_scene(...) for a Scene")
+    return Simulation(scene).run(progress=progress)
+
+
+__all__ = ["Scene", "SceneError", "load_scene", "scene_to_toml", "Simulation", "Result",
+           "RunError", "run", "__version__"]

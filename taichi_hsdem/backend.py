@@ -1,0 +1,84 @@
+"""Taichi initialisation: one backend and one floating-point type per process.
+
+Taichi can be initialised once per process in practice (re-initialising throws
+away every compiled kernel and allocated array), so the first simulation decides
+the backend and precision and later ones must agree.
+
+Kernels take ``ti.types.ndarray`` arguments rather than reading ``ti.field``
+members: an ndarray kernel is compiled once per dtype and reused by every
+simulation in the process (sweeps, calibration, tests), where a field-bound
+kernel is recompiled for every new set of fields (~0.1-0.2 s per kernel on the
+CPU).
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+
+# stdout belongs to the user: no import banner; and skip Taichi's probes for
+# torch/paddle, which this package never hands arrays to.
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
+os.environ.setdefault("TI_ENABLE_TORCH", "0")
+os.environ.setdefault("TI_ENABLE_PADDLE", "0")
+import taichi as ti  # noqa: E402
+
+_STATE: dict = {}
+
+
+class BackendError(RuntimeError):
+    """The requested backend cannot be used in this process."""
+
+
+def init(arch: str = "cpu", precision: str = "f64") -> str:
+    """Initialise Taichi once; return the name of the backend actually used.
+
+    Parameters
+    ----------
+    arch : {"cpu", "gpu", "auto"}
+    precision : {"f64", "f32"}
+
+    Examples
+    --------
+    >>> from taichi_hsdem import backend
+    >>> backend.init("cpu", "f64")
+    'x64'
+    """
+    if _STATE:
+        if _STATE["request"] != (arch, precision):
+            if _STATE["precision"] != precision:
+                raise BackendError(
+                    f"Taichi is already running with precision {_STATE['precision']} "
+                    f"in this process; start a new process for precision {precision}")
+            if arch != "auto" and _STATE["arch_request"] not in (arch, "auto"):
+                raise BackendError(
+                    f"Taichi is already running on {_STATE['arch']} in this process; "
+                    f"start a new process for arch={arch}")
+        return _STATE["arch"]
+    fp = ti.f64 if precision == "f64" else ti.f32
+    target = {"cpu": ti.cpu, "gpu": ti.gpu, "auto": ti.gpu}[arch]
+    # Taichi prints "Starting on arch=..." on stdout; stdout belongs to the user.
+    with contextlib.redirect_stdout(io.StringIO()):
+        ti.init(arch=target, default_fp=fp, default_ip=ti.i32, log_level=ti.ERROR,
+                offline_cache=True)
+    used = ti.lang.impl.current_cfg().arch.name
+    if arch == "gpu" and used in ("x64", "arm64"):
+        raise BackendError("arch=gpu was requested but Taichi found no usable GPU "
+                           "(CUDA, Vulkan or Metal); use --arch cpu or --arch auto")
+    _STATE.update(request=(arch, precision), arch_request=arch, arch=used,
+                  precision=precision, real=fp)
+    return used
+
+
+def real():
+    """The Taichi float type chosen at :func:`init`."""
+    return _STATE["real"]
+
+
+def numpy_real():
+    import numpy as np
+    return np.float64 if _STATE["precision"] == "f64" else np.float32
+
+
+def arch_name() -> str:
+    return _STATE.get("arch", "uninitialised")

@@ -1,0 +1,344 @@
+"""Contact forces (MODEL.md section 1): the LS-DEM node law and the disk fast path.
+
+For particle ``i`` against ``j`` every surface node ``p`` of ``i`` is mapped into
+``j``'s body frame and ``phi_j(p)`` is bilinearly interpolated on ``j``'s level-set
+grid. A node with ``phi_j(p) < 0`` is in contact:
+
+* normal force ``F_n = -phi_j(p) k_n n - gamma_n (u . n) n`` with ``n`` the
+  normalised gradient of ``phi_j`` (world frame) and ``u`` the velocity of ``i``
+  relative to ``j`` at ``p``;
+* shear ``F_s <- F_s - k_s dt u_t``, kept per (node, partner), rotated onto the
+  current tangent, reset when the node leaves contact, capped at ``mu |F_n|``;
+* moment ``(p - x) x (F_n + F_s)``.
+
+``gamma_n = c_e sqrt(k_n m_eff)`` with ``c_e = -2 ln(e) / sqrt(pi^2 + ln(e)^2)``.
+
+Both directions of a pair are evaluated (``i``'s nodes in ``j`` *and* ``j``'s nodes in
+``i``), so a corner of either body cannot pass through a face of the other. Each
+thread owns one body and sums every force acting on it, the reaction of the other
+direction included, instead of scattering reactions with atomics: the summation
+order is then fixed, so a realization gives bit-identical results whatever else
+runs beside it. The price is evaluating each node pair twice; the shear history
+is double-buffered (read ``old``, the owner writes ``new``) so that both threads
+see the same history.
+
+With ``normalize`` (the paper's choice) the resultant force and moment of one
+direction of one contact are divided by its number of nodes in contact.
+
+Disks (every particle a circle) take the analytic path: one contact point per
+pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
+"""
+
+import math
+
+from .backend import ti  # sets the environment before Taichi loads
+
+vec2 = ti.math.vec2
+
+# Per-pair material table, last axis: kn, ks, mu, c_e (restitution factor).
+PAIR_KN, PAIR_KS, PAIR_MU, PAIR_CE = 0, 1, 2, 3
+# Scalar parameters passed in one small array so that changing them never recompiles.
+P_DT, P_NORMALIZE, P_WALL_OX, P_WALL_OY, P_WALL_H = 0, 1, 2, 3, 4
+N_PARAMS = 5
+BIG = 1.0e30
+
+
+def restitution_factor(e: float) -> float:
+    """``c_e`` such that ``gamma_n = c_e sqrt(k_n m_eff)`` gives restitution ``e``."""
+    if e >= 1.0:
+        return 0.0
+    le = math.log(e)
+    return -2.0 * le / math.sqrt(math.pi ** 2 + le ** 2)
+
+
+@ti.func
+def rot(c, s, v):
+    return vec2(c * v.x - s * v.y, s * v.x + c * v.y)
+
+
+@ti.func
+def rot_t(c, s, v):
+    return vec2(c * v.x + s * v.y, -s * v.x + c * v.y)
+
+
+@ti.func
+def cross(a, b):
+    return a.x * b.y - a.y * b.x
+
+
+@ti.func
+def spin(w, r):
+    """Velocity ``w x r`` of a point at ``r`` from the centre of a body spinning at ``w``."""
+    return vec2(-w * r.y, w * r.x)
+
+
+@ti.func
+def grid_sample(data: ti.template(), off, nx, ny, ox, oy, h, q):
+    """Bilinear value and gradient of a grid stored x-first from ``data[off]``.
+
+    Outside the grid the value is ``BIG`` (no contact) and the gradient zero.
+    """
+    phi = BIG
+    grad = vec2(0.0, 0.0)
+    gx = (q.x - ox) / h
+    gy = (q.y - oy) / h
+    if gx >= 0.0 and gy >= 0.0 and gx < nx - 1 and gy < ny - 1:
+        i0 = ti.cast(ti.floor(gx), ti.i32)
+        j0 = ti.cast(ti.floor(gy), ti.i32)
+        fx = gx - i0
+        fy = gy - j0
+        a = data[off + i0 * ny + j0]
+        b = data[off + (i0 + 1) * ny + j0]
+        c = data[off + i0 * ny + j0 + 1]
+        d = data[off + (i0 + 1) * ny + j0 + 1]
+        phi = a * (1 - fx) * (1 - fy) + b * fx * (1 - fy) + c * (1 - fx) * fy + d * fx * fy
+        grad = vec2(((b - a) * (1 - fy) + (d - c) * fy) / h,
+                    ((c - a) * (1 - fx) + (d - b) * fx) / h)
+    return phi, grad
+
+
+@ti.func
+def contact_law(depth, n, u, fs_old, kn, ks, mu, gamma, dt):
+    """Normal and updated shear force of one contact point (see module doc)."""
+    un = u.dot(n)
+    fn = depth * kn * n - gamma * un * n
+    # Shear carried over from the last step, rotated onto the current tangent.
+    fs = fs_old - fs_old.dot(n) * n
+    fs -= ks * dt * (u - un * n)
+    cap = mu * fn.norm()
+    fsn = fs.norm()
+    if fsn > cap:
+        fs *= cap / fsn
+    return fn, fs
+
+
+@ti.func
+def find_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.template(), partner):
+    fs = vec2(0.0, 0.0)
+    for s in ti.static(range(slots)):
+        if hp[r, i, k, s] == partner + 1:
+            fs = hs[r, i, k, s]
+    return fs
+
+
+@ti.func
+def store_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.template(), partner, fs, flags: ti.template()):
+    stored = 0
+    for s in ti.static(range(slots)):
+        if stored == 0 and hp[r, i, k, s] == 0:
+            hp[r, i, k, s] = partner + 1
+            hs[r, i, k, s] = fs
+            stored = 1
+    if stored == 0:
+        flags[1] += 1  # history overflow: contact force kept, its history dropped
+
+
+@ti.func
+def wall_depth(wall: ti.template(), wall_meta: ti.template(), prm: ti.template(), p):
+    """Wall level set (positive in the fluid) and its gradient at world point ``p``."""
+    phi, g = grid_sample(wall, 0, wall_meta[0], wall_meta[1],
+                         prm[P_WALL_OX], prm[P_WALL_OY], prm[P_WALL_H], p)
+    return phi, g
+
+
+@ti.kernel
+def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray(),
+                w: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray(),
+                alive: ti.types.ndarray(), running: ti.types.ndarray(),
+                nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
+                sp: ti.types.ndarray(), tm: ti.types.ndarray(), mass: ti.types.ndarray(),
+                deq: ti.types.ndarray(), pair: ti.types.ndarray(), wallp: ti.types.ndarray(),
+                ls_phi: ti.types.ndarray(), ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
+                node_pos: ti.types.ndarray(), node_meta: ti.types.ndarray(),
+                wall: ti.types.ndarray(), wall_meta: ti.types.ndarray(), hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
+                hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(),
+                prm: ti.types.ndarray(), max_overlap: ti.types.ndarray(), flags: ti.types.ndarray(),
+                slots: ti.template()):
+    """Add every contact force and moment acting on each body (level-set path)."""
+    n_part = x.shape[1]
+    dt = prm[P_DT]
+    normalize = prm[P_NORMALIZE] > 0.5
+    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
+        if running[r] == 0 or alive[r, i] == 0:
+            continue
+        ti_ = tm[i]
+        xi = x[r, i]
+        ci = ti.cos(th[r, i])
+        si = ti.sin(th[r, i])
+        vi = v[r, i]
+        wi = w[r, i]
+        noff_i = node_meta[ti_, 0]
+        nn_i = node_meta[ti_, 1]
+        for k in range(nn_i):
+            for s in ti.static(range(slots)):
+                hp_new[r, i, k, s] = 0
+        ftot = vec2(0.0, 0.0)
+        mtot = 0.0
+        deepest = 0.0
+        for q in range(nbr_n[r, i]):
+            j = nbr[r, i, q]
+            if alive[r, j] == 0:
+                continue
+            tj = tm[j]
+            xj = x[r, j]
+            cj = ti.cos(th[r, j])
+            sj = ti.sin(th[r, j])
+            vj = v[r, j]
+            wj = w[r, j]
+            a, b = sp[i], sp[j]
+            kn = pair[a, b, PAIR_KN]
+            ks = pair[a, b, PAIR_KS]
+            mu = pair[a, b, PAIR_MU]
+            meff = mass[i] * mass[j] / (mass[i] + mass[j])
+            gamma = pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
+            # (a) nodes of i inside j: force on i, history owned by i.
+            fa = vec2(0.0, 0.0)
+            ma = 0.0
+            na = 0
+            for k in range(nn_i):
+                p = xi + rot(ci, si, vec2(node_pos[noff_i + k, 0], node_pos[noff_i + k, 1]))
+                qb = rot_t(cj, sj, p - xj)
+                phi, g = grid_sample(ls_phi, ls_meta[tj, 0], ls_meta[tj, 1], ls_meta[tj, 2],
+                                     ls_geo[tj, 0], ls_geo[tj, 1], ls_geo[tj, 2], qb)
+                if phi < 0.0 and g.norm() > 0.0:
+                    nrm = rot(cj, sj, g.normalized())
+                    u = (vi + spin(wi, p - xi)) - (vj + spin(wj, p - xj))
+                    fs_old = find_shear(hp_old, hs_old, r, i, k, slots, j)
+                    fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
+                    store_shear(hp_new, hs_new, r, i, k, slots, j, fs, flags)
+                    fa += fn + fs
+                    ma += cross(p - xi, fn + fs)
+                    na += 1
+                    deepest = ti.max(deepest, -phi / deq[i])
+            # (b) nodes of j inside i: the reaction on i, with j's (old) history.
+            fb = vec2(0.0, 0.0)
+            mb = 0.0
+            nb = 0
+            noff_j = node_meta[tj, 0]
+            for k in range(node_meta[tj, 1]):
+                p = xj + rot(cj, sj, vec2(node_pos[noff_j + k, 0], node_pos[noff_j + k, 1]))
+                qb = rot_t(ci, si, p - xi)
+                phi, g = grid_sample(ls_phi, ls_meta[ti_, 0], ls_meta[ti_, 1], ls_meta[ti_, 2],
+                                     ls_geo[ti_, 0], ls_geo[ti_, 1], ls_geo[ti_, 2], qb)
+                if phi < 0.0 and g.norm() > 0.0:
+                    nrm = rot(ci, si, g.normalized())
+                    u = (vj + spin(wj, p - xj)) - (vi + spin(wi, p - xi))
+                    fs_old = find_shear(hp_old, hs_old, r, j, k, slots, i)
+                    fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
+                    fb -= fn + fs
+                    mb -= cross(p - xi, fn + fs)
+                    nb += 1
+            if normalize:
+                if na > 0:
+                    fa /= na
+                    ma /= na
+                if nb > 0:
+                    fb /= nb
+                    mb /= nb
+            ftot += fa + fb
+            mtot += ma + mb
+        # Walls: nodes of i against the static wall level set.
+        a = sp[i]
+        kn = wallp[a, PAIR_KN]
+        ks = wallp[a, PAIR_KS]
+        mu = wallp[a, PAIR_MU]
+        gamma = wallp[a, PAIR_CE] * ti.sqrt(kn * mass[i])
+        fw = vec2(0.0, 0.0)
+        mw = 0.0
+        nw = 0
+        for k in range(nn_i):
+            p = xi + rot(ci, si, vec2(node_pos[noff_i + k, 0], node_pos[noff_i + k, 1]))
+            phi, g = wall_depth(wall, wall_meta, prm, p)
+            if phi < 0.0 and g.norm() > 0.0:
+                nrm = g.normalized()
+                u = vi + spin(wi, p - xi)
+                fs_old = find_shear(hp_old, hs_old, r, i, k, slots, n_part)
+                fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
+                store_shear(hp_new, hs_new, r, i, k, slots, n_part, fs, flags)
+                fw += fn + fs
+                mw += cross(p - xi, fn + fs)
+                nw += 1
+                deepest = ti.max(deepest, -phi / deq[i])
+        if normalize and nw > 0:
+            fw /= nw
+            mw /= nw
+        f[r, i] += ftot + fw
+        tau[r, i] += mtot + mw
+        ti.atomic_max(max_overlap[r], deepest)
+
+
+@ti.kernel
+def disk_contacts(x: ti.types.ndarray(), v: ti.types.ndarray(), w: ti.types.ndarray(),
+                  f: ti.types.ndarray(), tau: ti.types.ndarray(),
+                  alive: ti.types.ndarray(), running: ti.types.ndarray(),
+                  nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
+                  sp: ti.types.ndarray(), rad: ti.types.ndarray(), mass: ti.types.ndarray(),
+                  pair: ti.types.ndarray(), wallp: ti.types.ndarray(), wall: ti.types.ndarray(),
+                  wall_meta: ti.types.ndarray(),
+                  hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
+                  hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(),
+                  prm: ti.types.ndarray(), max_overlap: ti.types.ndarray(), flags: ti.types.ndarray(),
+                  slots: ti.template()):
+    """Add every contact force and moment on each disk (analytic fast path).
+
+    The pair is evaluated by both disks, each keeping its own copy of the shear
+    history; the two copies stay exact mirrors because every operation is
+    antisymmetric in (i, j).
+    """
+    n_part = x.shape[1]
+    dt = prm[P_DT]
+    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
+        if running[r] == 0 or alive[r, i] == 0:
+            continue
+        for s in ti.static(range(slots)):
+            hp_new[r, i, 0, s] = 0
+        xi = x[r, i]
+        vi = v[r, i]
+        wi = w[r, i]
+        ri = rad[i]
+        ftot = vec2(0.0, 0.0)
+        mtot = 0.0
+        deepest = 0.0
+        for q in range(nbr_n[r, i]):
+            j = nbr[r, i, q]
+            if alive[r, j] == 0:
+                continue
+            d = xi - x[r, j]
+            dist = d.norm()
+            depth = ri + rad[j] - dist
+            if depth > 0.0 and dist > 0.0:
+                nrm = d / dist
+                a, b = sp[i], sp[j]
+                kn = pair[a, b, PAIR_KN]
+                meff = mass[i] * mass[j] / (mass[i] + mass[j])
+                gamma = pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
+                # contact point half-way through the overlap
+                ra = -(ri - 0.5 * depth) * nrm
+                rb = (rad[j] - 0.5 * depth) * nrm
+                u = (vi + spin(wi, ra)) - (v[r, j] + spin(w[r, j], rb))
+                fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, j)
+                fn, fs = contact_law(depth, nrm, u, fs_old, kn, pair[a, b, PAIR_KS],
+                                     pair[a, b, PAIR_MU], gamma, dt)
+                store_shear(hp_new, hs_new, r, i, 0, slots, j, fs, flags)
+                ftot += fn + fs
+                mtot += cross(ra, fs)
+                deepest = ti.max(deepest, depth / (2.0 * ri))
+        phi, g = wall_depth(wall, wall_meta, prm, xi)
+        depth = ri - phi
+        if depth > 0.0 and g.norm() > 0.0:
+            nrm = g.normalized()
+            a = sp[i]
+            kn = wallp[a, PAIR_KN]
+            gamma = wallp[a, PAIR_CE] * ti.sqrt(kn * mass[i])
+            ra = -(ri - 0.5 * depth) * nrm
+            u = vi + spin(wi, ra)
+            fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, n_part)
+            fn, fs = contact_law(depth, nrm, u, fs_old, kn, wallp[a, PAIR_KS],
+                                 wallp[a, PAIR_MU], gamma, dt)
+            store_shear(hp_new, hs_new, r, i, 0, slots, n_part, fs, flags)
+            ftot += fn + fs
+            mtot += cross(ra, fs)
+            deepest = ti.max(deepest, depth / (2.0 * ri))
+        f[r, i] += ftot
+        tau[r, i] += mtot
+        ti.atomic_max(max_overlap[r], deepest)

@@ -1,0 +1,57 @@
+"""Explicit integration with global damping (MODEL.md section 1).
+
+    v     <- [(1 - xi dt/2) v     + dt F/m] / (1 + xi dt/2)
+    omega <- [(1 - xi dt/2) omega + dt M/I] / (1 + xi dt/2)
+    x     <- x + dt v,   theta <- theta + dt omega
+
+``xi`` is per species (``damping.xi = "auto"`` depends on the density). The same
+kernel watches for what makes a step untrustworthy: non-finite values and bodies
+moving more than a quarter of their size in one step (flag per realization), and
+a body that has moved half the Verlet skin since the last neighbour build (asks
+for a rebuild). It also counts bodies crossing the escape line and parks them.
+"""
+
+from .backend import ti  # sets the environment before Taichi loads
+
+from .neighbors import F_REBUILD
+
+# per-realization status bits set by kernels
+BAD_NAN, BAD_FAST = 1, 2
+# scalar parameters of this kernel (real array)
+I_DT, I_SKIN, I_XESC = 0, 1, 2
+N_IPARAMS = 3
+
+
+@ti.kernel
+def advance(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray(),
+            w: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray(),
+            alive: ti.types.ndarray(), running: ti.types.ndarray(),
+            sp: ti.types.ndarray(), mass: ti.types.ndarray(), inertia: ti.types.ndarray(),
+            deq: ti.types.ndarray(), xi: ti.types.ndarray(), x_ref: ti.types.ndarray(),
+            prm: ti.types.ndarray(), bad: ti.types.ndarray(), escaped: ti.types.ndarray(),
+            flags: ti.types.ndarray()):
+    dt = prm[I_DT]
+    half_skin = 0.5 * prm[I_SKIN]
+    x_escape = prm[I_XESC]
+    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
+        if running[r] == 0 or alive[r, i] == 0:
+            continue
+        damp = xi[sp[i]] * dt * 0.5
+        vn = ((1.0 - damp) * v[r, i] + dt * f[r, i] / mass[i]) / (1.0 + damp)
+        wn = ((1.0 - damp) * w[r, i] + dt * tau[r, i] / inertia[i]) / (1.0 + damp)
+        xn = x[r, i] + dt * vn
+        v[r, i] = vn
+        w[r, i] = wn
+        x[r, i] = xn
+        th[r, i] += dt * wn
+        if not (ti.math.isinf(xn).any() or ti.math.isnan(xn).any()
+                or ti.math.isnan(wn) or ti.math.isinf(wn)):
+            if vn.norm() * dt > 0.25 * deq[i]:
+                ti.atomic_or(bad[r], BAD_FAST)
+        else:
+            ti.atomic_or(bad[r], BAD_NAN)
+        if (xn - x_ref[r, i]).norm() > half_skin:
+            flags[F_REBUILD] = 1
+        if xn.x > x_escape:
+            alive[r, i] = 0
+            escaped[r] += 1

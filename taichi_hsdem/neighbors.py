@@ -1,0 +1,144 @@
+"""Broad phase: a cell list per realization feeding a Verlet neighbour list.
+
+Bodies whose bounding circles come within ``skin`` of each other are listed; the
+list is rebuilt only after some body moved more than ``skin / 2`` since the last
+build (the integrator raises a flag). Capacities are fixed arrays with overflow
+flags: the host reads the flag, grows the array and rebuilds, so a contact is
+never dropped silently.
+
+Binning runs serially inside each realization (realizations in parallel), so the
+neighbour order, and with it the order in which forces are summed, is
+reproducible.
+"""
+
+import numpy as np
+from .backend import ti  # sets the environment before Taichi loads
+
+vec2 = ti.math.vec2
+
+# flags array layout (int32), shared with the other kernels
+F_CELL_OVERFLOW, F_HISTORY_OVERFLOW, F_REBUILD, F_NBR_OVERFLOW = 0, 1, 2, 3
+N_FLAGS = 8
+# grid parameters (real array): origin x, origin y, cell size, skin
+G_OX, G_OY, G_CS, G_SKIN = 0, 1, 2, 3
+
+
+@ti.kernel
+def bin_particles(x: ti.types.ndarray(), alive: ti.types.ndarray(), running: ti.types.ndarray(),
+                  cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
+                  grid: ti.types.ndarray(), ncx: ti.i32, ncy: ti.i32, flags: ti.types.ndarray()):
+    cap = cell_p.shape[2]
+    for r in range(x.shape[0]):
+        for c in range(ncx * ncy):
+            cell_n[r, c] = 0
+        if running[r] != 0:
+            for i in range(x.shape[1]):
+                if alive[r, i] != 0:
+                    cx = ti.min(ti.max(ti.cast(ti.floor((x[r, i].x - grid[G_OX]) / grid[G_CS]), ti.i32), 0), ncx - 1)
+                    cy = ti.min(ti.max(ti.cast(ti.floor((x[r, i].y - grid[G_OY]) / grid[G_CS]), ti.i32), 0), ncy - 1)
+                    c = cx * ncy + cy
+                    slot = cell_n[r, c]
+                    if slot < cap:
+                        cell_p[r, c, slot] = i
+                    else:
+                        flags[F_CELL_OVERFLOW] = 1
+                    cell_n[r, c] = slot + 1
+
+
+@ti.kernel
+def build_neighbors(x: ti.types.ndarray(), x_ref: ti.types.ndarray(), alive: ti.types.ndarray(),
+                    running: ti.types.ndarray(), rb: ti.types.ndarray(),
+                    cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
+                    nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
+                    grid: ti.types.ndarray(), ncx: ti.i32, ncy: ti.i32, flags: ti.types.ndarray()):
+    cap = nbr.shape[2]
+    ccap = cell_p.shape[2]
+    skin = grid[G_SKIN]
+    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
+        nbr_n[r, i] = 0
+        x_ref[r, i] = x[r, i]
+        if running[r] == 0 or alive[r, i] == 0:
+            continue
+        xi = x[r, i]
+        cx = ti.min(ti.max(ti.cast(ti.floor((xi.x - grid[G_OX]) / grid[G_CS]), ti.i32), 0), ncx - 1)
+        cy = ti.min(ti.max(ti.cast(ti.floor((xi.y - grid[G_OY]) / grid[G_CS]), ti.i32), 0), ncy - 1)
+        count = 0
+        for dx, dy in ti.ndrange((-1, 2), (-1, 2)):
+            ax = cx + dx
+            ay = cy + dy
+            if 0 <= ax < ncx and 0 <= ay < ncy:
+                c = ax * ncy + ay
+                for s in range(ti.min(cell_n[r, c], ccap)):
+                    j = cell_p[r, c, s]
+                    if j != i and (x[r, j] - xi).norm() < rb[i] + rb[j] + skin:
+                        if count < cap:
+                            nbr[r, i, count] = j
+                        else:
+                            flags[F_NBR_OVERFLOW] = 1
+                        count += 1
+        nbr_n[r, i] = ti.min(count, cap)
+
+
+class NeighborList:
+    """Owns the cell list and the neighbour list of a batch of realizations.
+
+    Parameters
+    ----------
+    n_real, n_part : int
+        Realizations and particles per realization.
+    bbox : (x_min, x_max, y_min, y_max)
+        Region the bodies live in (bodies outside are binned into edge cells).
+    max_radius, skin : float
+        Largest bounding radius and the Verlet skin.
+    real : Taichi float type
+    """
+
+    def __init__(self, n_real, n_part, bbox, max_radius, skin, real):
+        self.real = real
+        self.skin = skin
+        cs = 2.0 * max_radius + skin
+        self.ncx = max(1, int(np.ceil((bbox[1] - bbox[0]) / cs)))
+        self.ncy = max(1, int(np.ceil((bbox[3] - bbox[2]) / cs)))
+        self.grid = ti.ndarray(real, shape=4)
+        self.grid.from_numpy(np.array([bbox[0], bbox[2], cs, skin], dtype=_np(real)))
+        self.shape = (n_real, n_part)
+        self.cell_cap = 8
+        self.nbr_cap = 16
+        self.cell_n = ti.ndarray(ti.i32, shape=(n_real, self.ncx * self.ncy))
+        self._alloc_cells()
+        self._alloc_nbr()
+        self.x_ref = ti.Vector.ndarray(2, real, shape=self.shape)
+        self.builds = 0
+
+    def _alloc_cells(self):
+        self.cell_p = ti.ndarray(ti.i32, shape=(self.shape[0], self.ncx * self.ncy, self.cell_cap))
+
+    def _alloc_nbr(self):
+        self.nbr = ti.ndarray(ti.i32, shape=self.shape + (self.nbr_cap,))
+        self.nbr_n = ti.ndarray(ti.i32, shape=self.shape)
+
+    def build(self, x, alive, running, rb, flags):
+        """Rebuild, growing the capacities until nothing overflows."""
+        while True:
+            flags_np = flags.to_numpy()
+            flags_np[[F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD]] = 0
+            flags.from_numpy(flags_np)
+            bin_particles(x, alive, running, self.cell_n, self.cell_p, self.grid,
+                          self.ncx, self.ncy, flags)
+            build_neighbors(x, self.x_ref, alive, running, rb, self.cell_n, self.cell_p,
+                            self.nbr, self.nbr_n, self.grid, self.ncx, self.ncy, flags)
+            got = flags.to_numpy()
+            if got[F_CELL_OVERFLOW]:
+                self.cell_cap *= 2
+                self._alloc_cells()
+                continue
+            if got[F_NBR_OVERFLOW]:
+                self.nbr_cap *= 2
+                self._alloc_nbr()
+                continue
+            self.builds += 1
+            return
+
+
+def _np(real):
+    return np.float64 if real == ti.f64 else np.float32

@@ -1,0 +1,890 @@
+"""Particle shape templates for LS-DEM: geometry, surface nodes, level sets.
+
+A shape template is a rigid 2D outline in its own *body frame*: the centroid is at
+the origin and polygon vertices run counter-clockwise. From it this module derives
+what the rest of the method needs (MODEL.md section 1):
+
+* the mass properties (area, polar moment of area about the centroid), so that a
+  particle's mass and inertia come from its shape instead of being assumed;
+* surface nodes spaced evenly along the outline, each with the length of boundary
+  it stands for and its outward normal (contact and fluid forces act there);
+* the exact signed distance (negative inside) and its sampled version, a level-set
+  grid read by bilinear interpolation, as the contact kernels do;
+* ``stack``, which lays all templates out in flat arrays for upload to Taichi.
+
+Everything here is plain numpy and runs on the host: once per template, and
+for `overlaps`, once per candidate pair when particles are placed. The kernels
+that use the result live elsewhere.
+
+Frames: a body point ``p`` of a particle at centre ``x`` and angle ``theta`` sits
+at ``R(theta) p + x`` in the world (``transform``); ``to_body`` inverts it.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "OUTSIDE_PHI",
+    "Shape",
+    "LevelSetGrid",
+    "circle",
+    "square",
+    "rectangle",
+    "regular_polygon",
+    "polygon",
+    "signed_distance",
+    "make_level_set",
+    "sample",
+    "transform",
+    "to_body",
+    "overlaps",
+    "stack",
+]
+
+#: Level-set value returned for points outside a grid: far enough that no
+#: contact test (``phi < 0``) can fire, finite so it survives float32 upload.
+OUTSIDE_PHI = 1.0e30
+
+# Round-off allowance of `overlaps`, relative to the bounding radii: outlines
+# this close count as touching, not overlapping, so that shapes placed edge to
+# edge by a rotation (cos(pi/2) is 6e-17, not 0) are not refused.
+_REL_TOL = 1.0e-9
+
+# Bound on the (points x edges) temporaries of the polygon distance, so that a
+# fine level-set grid does not allocate gigabytes at once.
+_CHUNK_ENTRIES = 1 << 20
+
+
+# eq=False: generated equality would compare the arrays elementwise and fail;
+# templates are compared by identity.
+@dataclass(frozen=True, eq=False)
+class Shape:
+    """One particle shape template, in its body frame.
+
+    Build it with `circle`, `square`, `rectangle`, `regular_polygon` or `polygon`
+    rather than directly. Arrays are read-only.
+
+    Attributes
+    ----------
+    name : str
+        The constructor that made it: ``"circle"``, ``"square"``, ``"rectangle"``,
+        ``"regular_polygon"`` or ``"polygon"``.
+    kind : str
+        ``"circle"`` (analytic contact, no level set needed) or ``"polygon"``.
+    radius : float
+        Circle radius for a circle; the bounding radius for a polygon.
+    vertices : ndarray of shape (nv, 2) or None
+        Polygon vertices, centroid at the origin, counter-clockwise. None for a
+        circle.
+    area : float
+        Area of the outline.
+    perimeter : float
+        Length of the outline.
+    inertia_per_mass : float
+        Polar moment of area about the centroid divided by the area, so that a
+        particle of mass ``m`` has moment of inertia ``m * inertia_per_mass``.
+    bounding_radius : float
+        Largest distance from the centroid to the outline.
+    equivalent_diameter : float
+        Diameter of the disk of the same area, ``sqrt(4 A / pi)``.
+    sphericity : float
+        2D sphericity ``sqrt(4 pi A) / P``: 1 for a circle, 0.886 for a square.
+    nodes : ndarray of shape (n, 2)
+        Surface nodes, evenly spaced by arc length; every polygon vertex is one.
+    node_lengths : ndarray of shape (n,)
+        Length of boundary each node stands for (half of each adjacent segment
+        for a polygon, the arc ``P / n`` for a circle); sums to ``perimeter``.
+    node_normals : ndarray of shape (n, 2)
+        Outward unit normals at the nodes (at a vertex, the normalised sum of the
+        two adjacent edge normals).
+    """
+
+    name: str
+    kind: str
+    radius: float
+    vertices: np.ndarray | None
+    area: float
+    perimeter: float
+    inertia_per_mass: float
+    bounding_radius: float
+    equivalent_diameter: float
+    sphericity: float
+    nodes: np.ndarray
+    node_lengths: np.ndarray
+    node_normals: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class LevelSetGrid:
+    """Signed distance of one template sampled on a regular grid (body frame).
+
+    Attributes
+    ----------
+    origin : ndarray of shape (2,)
+        Body-frame coordinates of grid node ``(0, 0)``.
+    spacing : float
+        Distance between neighbouring grid nodes, the same along x and y.
+    phi : ndarray of shape (nx, ny)
+        ``phi[i, j]`` is the signed distance at ``origin + (i, j) * spacing``
+        (x-first indexing).
+    """
+
+    origin: np.ndarray
+    spacing: float
+    phi: np.ndarray
+
+
+# ---------------------------------------------------------------------------
+# Constructors
+# ---------------------------------------------------------------------------
+
+
+def circle(diameter, n_nodes=40) -> Shape:
+    """A disk of the given diameter.
+
+    Parameters
+    ----------
+    diameter : float
+        Diameter, > 0.
+    n_nodes : int, optional
+        Number of surface nodes (>= 3), equally spaced starting at angle 0.
+
+    Returns
+    -------
+    Shape
+
+    Examples
+    --------
+    >>> s = circle(2.0, n_nodes=4)
+    >>> s.nodes.round(12).tolist()
+    [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [-0.0, -1.0]]
+    >>> float(s.inertia_per_mass)
+    0.5
+    """
+    r = 0.5 * _positive("diameter", diameter)
+    n = _node_count(n_nodes)
+    angle = 2.0 * np.pi * np.arange(n) / n
+    normals = np.column_stack([np.cos(angle), np.sin(angle)])
+    perimeter = 2.0 * np.pi * r
+    # Each node stands for its arc of the true circle, not half of each chord, so
+    # the node lengths sum to the circle's perimeter as they do for polygons.
+    return _make_shape(
+        name="circle",
+        kind="circle",
+        vertices=None,
+        area=np.pi * r * r,
+        perimeter=perimeter,
+        inertia_per_mass=0.5 * r * r,
+        bounding_radius=r,
+        nodes=r * normals,
+        node_lengths=np.full(n, perimeter / n),
+        node_normals=normals,
+    )
+
+
+def square(side, n_nodes=40) -> Shape:
+    """An axis-aligned square (edges parallel to the body axes).
+
+    Unlike ``regular_polygon(4, ...)``, which puts a vertex on the +x axis, the
+    square's edges face the axes; its first node is the corner ``(-s/2, -s/2)``.
+
+    Parameters
+    ----------
+    side : float
+        Edge length, > 0.
+    n_nodes : int, optional
+        Number of surface nodes, >= 4.
+
+    Returns
+    -------
+    Shape
+
+    Examples
+    --------
+    >>> s = square(1.0, n_nodes=8)
+    >>> float(s.area), float(s.perimeter), float(s.node_lengths[0])
+    (1.0, 4.0, 0.5)
+    """
+    side = _positive("side", side)
+    return _polygon_shape(_box(side, side), n_nodes, "square", centred=True)
+
+
+def rectangle(width, height, n_nodes=40) -> Shape:
+    """An axis-aligned rectangle, ``width`` along body x and ``height`` along y.
+
+    Parameters
+    ----------
+    width, height : float
+        Edge lengths, > 0.
+    n_nodes : int, optional
+        Number of surface nodes, >= 4.
+
+    Returns
+    -------
+    Shape
+
+    Examples
+    --------
+    >>> s = rectangle(2.0, 1.0)
+    >>> round(float(s.inertia_per_mass), 12)  # (w^2 + h^2) / 12
+    0.416666666667
+    """
+    width = _positive("width", width)
+    height = _positive("height", height)
+    return _polygon_shape(_box(width, height), n_nodes, "rectangle", centred=True)
+
+
+def regular_polygon(n_vertices, diameter, n_nodes=40) -> Shape:
+    """A regular polygon inscribed in a circle of the given diameter.
+
+    Parameters
+    ----------
+    n_vertices : int
+        Number of vertices, >= 3.
+    diameter : float
+        Circumscribed (bounding) diameter, > 0. Vertex 0 lies on the +x axis.
+    n_nodes : int, optional
+        Number of surface nodes, >= ``n_vertices``.
+
+    Returns
+    -------
+    Shape
+
+    Examples
+    --------
+    >>> s = regular_polygon(3, 2.0, n_nodes=6)
+    >>> s.vertices.round(12).tolist()
+    [[1.0, 0.0], [-0.5, 0.866025403784], [-0.5, -0.866025403784]]
+    """
+    try:
+        nv = operator.index(n_vertices)
+    except TypeError:
+        raise ValueError(f"n_vertices must be an integer, got {n_vertices!r}") from None
+    if nv < 3:
+        raise ValueError(f"a regular polygon needs n_vertices >= 3, got {nv}")
+    r = 0.5 * _positive("diameter", diameter)
+    angle = 2.0 * np.pi * np.arange(nv) / nv
+    vertices = r * np.column_stack([np.cos(angle), np.sin(angle)])
+    return _polygon_shape(vertices, n_nodes, "regular_polygon", centred=True)
+
+
+def polygon(vertices, n_nodes=40) -> Shape:
+    """Any simple polygon, convex or concave, given in either orientation.
+
+    The outline is recentred on its centroid and made counter-clockwise; give
+    each vertex once (the outline closes itself).
+
+    Parameters
+    ----------
+    vertices : array_like of shape (nv, 2)
+        The outline, nv >= 3, no repeated vertices, no crossing or touching edges.
+    n_nodes : int, optional
+        Number of surface nodes, >= nv.
+
+    Returns
+    -------
+    Shape
+
+    Raises
+    ------
+    ValueError
+        If the outline has fewer than 3 vertices, repeated vertices, crossing
+        edges or zero area, or if ``n_nodes`` is fewer than its vertices.
+
+    Examples
+    --------
+    >>> L = polygon([[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]])
+    >>> float(L.area), float(L.perimeter)
+    (3.0, 8.0)
+    """
+    return _polygon_shape(vertices, n_nodes, "polygon")
+
+
+# ---------------------------------------------------------------------------
+# Distance, level sets, frames
+# ---------------------------------------------------------------------------
+
+
+def signed_distance(shape, points) -> np.ndarray:
+    """Exact signed distance from points to a shape's outline, negative inside.
+
+    Parameters
+    ----------
+    shape : Shape
+    points : array_like of shape (..., 2)
+        Body-frame points.
+
+    Returns
+    -------
+    ndarray of shape (...)
+
+    Examples
+    --------
+    >>> signed_distance(square(2.0), [[0.0, 0.0], [2.0, 0.0], [4.0, 5.0]]).tolist()
+    [-1.0, 1.0, 5.0]
+    """
+    p = np.asarray(points, dtype=float)
+    if p.shape[-1:] != (2,):
+        raise ValueError(f"points must have shape (..., 2), got {p.shape}")
+    if shape.kind == "circle":
+        return np.hypot(p[..., 0], p[..., 1]) - shape.radius
+    flat = p.reshape(-1, 2)
+    out = np.empty(len(flat))
+    chunk = max(1, _CHUNK_ENTRIES // len(shape.vertices))
+    for start in range(0, len(flat), chunk):
+        out[start : start + chunk] = _polygon_sdf(shape.vertices, flat[start : start + chunk])
+    return out.reshape(p.shape[:-1])
+
+
+def make_level_set(shape, spacing, margin_cells=3) -> LevelSetGrid:
+    """Sample a shape's exact signed distance on a regular grid.
+
+    The grid covers the shape's bounding box, centred on it, plus
+    ``margin_cells`` cells on every side, so that nodes of a neighbour slightly
+    outside the shape still read a meaningful (positive) distance.
+
+    Parameters
+    ----------
+    shape : Shape
+    spacing : float
+        Grid spacing, > 0 (the scene's ``ls_spacing``).
+    margin_cells : int, optional
+        Cells added beyond the bounding box on each side, >= 1.
+
+    Returns
+    -------
+    LevelSetGrid
+
+    Examples
+    --------
+    >>> g = make_level_set(square(1.0), 0.25, margin_cells=1)
+    >>> g.phi.shape, g.origin.tolist()
+    ((7, 7), [-0.75, -0.75])
+    """
+    h = _positive("spacing", spacing)
+    try:
+        margin = operator.index(margin_cells)
+    except TypeError:
+        raise ValueError(f"margin_cells must be an integer, got {margin_cells!r}") from None
+    if margin < 1:
+        raise ValueError(f"margin_cells must be >= 1, got {margin}")
+    if shape.kind == "circle":
+        lo = np.full(2, -shape.radius)
+        hi = np.full(2, shape.radius)
+    else:
+        lo = shape.vertices.min(axis=0)
+        hi = shape.vertices.max(axis=0)
+    # The small allowance keeps a box that is a whole number of cells wide from
+    # gaining a cell to round-off; the slack of a partial cell is split evenly
+    # so symmetric shapes get symmetric grids.
+    cells = np.ceil((hi - lo) / h - 1e-9).astype(int)
+    origin = lo - 0.5 * (cells * h - (hi - lo)) - margin * h
+    nx, ny = cells + 2 * margin + 1
+    gx = origin[0] + h * np.arange(nx)
+    gy = origin[1] + h * np.arange(ny)
+    pts = np.stack(np.meshgrid(gx, gy, indexing="ij"), axis=-1)
+    phi = signed_distance(shape, pts)
+    return LevelSetGrid(origin=_frozen(origin), spacing=h, phi=_frozen(phi))
+
+
+def sample(grid, points) -> tuple[np.ndarray, np.ndarray]:
+    """Bilinear level-set value and its gradient at body-frame points.
+
+    The gradient is that of the bilinear interpolant itself (what the contact
+    kernels normalise into a contact normal), not a finite-difference stencil.
+
+    Parameters
+    ----------
+    grid : LevelSetGrid
+    points : array_like of shape (..., 2)
+        Body-frame points.
+
+    Returns
+    -------
+    phi : ndarray of shape (...)
+        Interpolated signed distance; `OUTSIDE_PHI` for points outside the grid.
+    grad : ndarray of shape (..., 2)
+        Gradient of the interpolant; zero outside the grid.
+
+    Examples
+    --------
+    >>> g = make_level_set(square(1.0), 0.05)
+    >>> phi, grad = sample(g, [[0.6, 0.0], [9.0, 9.0]])
+    >>> phi.round(12).tolist(), grad.round(12).tolist()
+    ([0.1, 1e+30], [[1.0, 0.0], [0.0, 0.0]])
+    """
+    p = np.asarray(points, dtype=float)
+    if p.shape[-1:] != (2,):
+        raise ValueError(f"points must have shape (..., 2), got {p.shape}")
+    nx, ny = grid.phi.shape
+    u = (p[..., 0] - grid.origin[0]) / grid.spacing
+    w = (p[..., 1] - grid.origin[1]) / grid.spacing
+    # Written so that NaN coordinates also land outside.
+    inside = (u >= 0) & (u <= nx - 1) & (w >= 0) & (w <= ny - 1)
+    u = np.where(inside, u, 0.0)
+    w = np.where(inside, w, 0.0)
+    # A point on the last grid line belongs to the last cell, at t = 1.
+    i = np.minimum(np.floor(u).astype(int), nx - 2)
+    j = np.minimum(np.floor(w).astype(int), ny - 2)
+    tx = u - i
+    ty = w - j
+    f = grid.phi
+    f00, f10, f01, f11 = f[i, j], f[i + 1, j], f[i, j + 1], f[i + 1, j + 1]
+    phi = (1 - tx) * (1 - ty) * f00 + tx * (1 - ty) * f10 + (1 - tx) * ty * f01 + tx * ty * f11
+    gx = ((1 - ty) * (f10 - f00) + ty * (f11 - f01)) / grid.spacing
+    gy = ((1 - tx) * (f01 - f00) + tx * (f11 - f10)) / grid.spacing
+    phi = np.where(inside, phi, OUTSIDE_PHI)
+    grad = np.where(inside[..., None], np.stack([gx, gy], axis=-1), 0.0)
+    return phi, grad
+
+
+def transform(points_body, x, theta) -> np.ndarray:
+    """Body-frame points to world frame: rotate by ``theta`` (CCW), then translate by ``x``.
+
+    Parameters
+    ----------
+    points_body : array_like of shape (..., 2)
+    x : array_like of shape (..., 2)
+        Centre of mass in the world; broadcasts against ``points_body``.
+    theta : float or array_like of shape (...)
+        Angle in radians; broadcasts against the points' leading dimensions.
+
+    Returns
+    -------
+    ndarray of shape (..., 2)
+
+    Examples
+    --------
+    >>> transform([[1.0, 0.0]], [2.0, 3.0], np.pi / 2).round(12).tolist()
+    [[2.0, 4.0]]
+    """
+    p = np.asarray(points_body, dtype=float)
+    c, s = np.cos(theta), np.sin(theta)
+    rotated = np.stack([c * p[..., 0] - s * p[..., 1], s * p[..., 0] + c * p[..., 1]], axis=-1)
+    return rotated + np.asarray(x, dtype=float)
+
+
+def to_body(points_world, x, theta) -> np.ndarray:
+    """World-frame points to the body frame of a particle at ``x``, angle ``theta``.
+
+    The inverse of `transform`.
+
+    Parameters
+    ----------
+    points_world : array_like of shape (..., 2)
+    x : array_like of shape (..., 2)
+        Centre of mass in the world; broadcasts against ``points_world``.
+    theta : float or array_like of shape (...)
+        Angle in radians.
+
+    Returns
+    -------
+    ndarray of shape (..., 2)
+
+    Examples
+    --------
+    >>> to_body([[2.0, 4.0]], [2.0, 3.0], np.pi / 2).round(12).tolist()
+    [[1.0, 0.0]]
+    """
+    d = np.asarray(points_world, dtype=float) - np.asarray(x, dtype=float)
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], axis=-1)
+
+
+def overlaps(shape_a, xa, ta, shape_b, xb, tb, gap=0.0) -> bool:
+    """Whether two placed shapes come closer than ``gap``.
+
+    Used to place particles without overlap. Far pairs are rejected on their
+    bounding circles. A pair with a disk is decided exactly from the disk's
+    centre (distance to the other outline minus the radius). Two polygons
+    overlap when an edge of one crosses an edge of the other (two bars laid
+    across each other, no corner inside either), or when the exact signed
+    distance of one, evaluated at probe points of the other, falls below
+    ``gap``. The probes of a polygon are its vertices (the distance between
+    disjoint polygons is reached at a vertex of one of them, so this is exact
+    for ``gap > 0``, and testing both ways catches a corner driven into a face),
+    the midpoints of its edges' pieces between the other's vertices lying on
+    them (outlines that share part of an edge, at ``gap = 0``) and its centroid
+    when that lies inside it (identical placement). The answer does not depend
+    on the number of surface nodes.
+
+    Outlines that touch to within round-off (1e-9 of the bounding radii) do not
+    overlap at ``gap = 0``.
+
+    Parameters
+    ----------
+    shape_a, shape_b : Shape
+    xa, xb : array_like of shape (2,)
+        Centres in the world frame.
+    ta, tb : float
+        Angles in radians.
+    gap : float, optional
+        Required clearance, >= 0.
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> s = square(1.0)
+    >>> overlaps(s, [0, 0], 0.0, s, [1.0, 0.0], 0.0)      # touching faces
+    False
+    >>> overlaps(s, [0, 0], 0.0, s, [1.0, 0.0], 0.0, gap=0.01)
+    True
+    """
+    gap = float(gap)
+    if not gap >= 0:
+        raise ValueError(f"gap must be >= 0, got {gap}")
+    xa = np.asarray(xa, dtype=float)
+    xb = np.asarray(xb, dtype=float)
+    tol = _REL_TOL * (shape_a.bounding_radius + shape_b.bounding_radius)
+    limit = gap - tol
+    centre_distance = float(np.hypot(*(xb - xa)))
+    if centre_distance - shape_a.bounding_radius - shape_b.bounding_radius >= limit:
+        return False
+    if shape_a.kind == "circle":
+        return bool(signed_distance(shape_b, to_body(xa, xb, tb)) - shape_a.radius < limit)
+    if shape_b.kind == "circle":
+        return bool(signed_distance(shape_a, to_body(xb, xa, ta)) - shape_b.radius < limit)
+    va = transform(shape_a.vertices, xa, ta)
+    vb = transform(shape_b.vertices, xb, tb)
+    ends_a, ends_b = np.roll(va, -1, axis=0), np.roll(vb, -1, axis=0)
+    if _proper_crossings(va[:, None], ends_a[:, None], vb[None], ends_b[None], tol).any():
+        return True
+    for s, v, x, other, vo, xo, to in (
+        (shape_a, va, xa, shape_b, vb, xb, tb),
+        (shape_b, vb, xb, shape_a, va, xa, ta),
+    ):
+        probes = [v, _piece_midpoints(v, vo, tol)]
+        if signed_distance(s, np.zeros(2)) < 0:
+            probes.append(x[None])
+        if signed_distance(other, to_body(np.vstack(probes), xo, to)).min() < limit:
+            return True
+    return False
+
+
+def stack(shapes, spacings) -> dict:
+    """Lay all templates' level sets and surface nodes out in flat arrays.
+
+    This is the layout the Taichi fields take: one flat level-set array with a
+    per-template offset, shape, origin and spacing, and the surface nodes of all
+    templates one after another (nodes are stored once per template and moved
+    with each particle on the fly).
+
+    Parameters
+    ----------
+    shapes : sequence of Shape
+        The templates; template ``k`` is ``shapes[k]``.
+    spacings : sequence of float or None
+        Level-set spacing of each template. ``None`` is allowed for a circle and
+        builds no grid for it: disks use the analytic contact.
+
+    Returns
+    -------
+    dict of ndarray
+        With ``T = len(shapes)``:
+
+        * ``ls_phi`` (sum nx*ny,) float64: grid ``k`` flattened x-first, value
+          ``(i, j)`` at ``ls_offset[k] + i * ny + j``;
+        * ``ls_offset`` (T,) int32; ``ls_shape`` (T, 2) int32, ``(nx, ny)``,
+          ``(0, 0)`` where no grid was built;
+        * ``ls_origin`` (T, 2), ``ls_spacing`` (T,) float64 (0 where no grid);
+        * ``node_pos`` (N, 2), ``node_len`` (N,), ``node_normal`` (N, 2) float64;
+        * ``node_offset``, ``node_count`` (T,) int32;
+        * ``is_circle`` (T,) int32; ``radius``, ``bounding_radius`` (T,) float64.
+
+    Examples
+    --------
+    >>> d = stack([circle(1.0), square(1.0)], [None, 0.1])
+    >>> d["ls_shape"].tolist(), d["ls_offset"].tolist(), d["node_offset"].tolist()
+    ([[0, 0], [17, 17]], [0, 0], [0, 40])
+    """
+    shapes = list(shapes)
+    spacings = list(spacings)
+    if len(shapes) != len(spacings):
+        raise ValueError(f"got {len(shapes)} shapes but {len(spacings)} spacings")
+    t = len(shapes)
+    ls_offset = np.zeros(t, dtype=np.int32)
+    ls_shape = np.zeros((t, 2), dtype=np.int32)
+    ls_origin = np.zeros((t, 2))
+    ls_spacing = np.zeros(t)
+    phis = []
+    total = 0
+    for k, (shape, h) in enumerate(zip(shapes, spacings)):
+        ls_offset[k] = total
+        if h is None:
+            if shape.kind != "circle":
+                raise ValueError(
+                    f"template {k} ({shape.name}) is a polygon and needs a level-set spacing, got None"
+                )
+            continue
+        grid = make_level_set(shape, h)
+        ls_shape[k] = grid.phi.shape
+        ls_origin[k] = grid.origin
+        ls_spacing[k] = grid.spacing
+        phis.append(grid.phi.ravel())  # C order: index i * ny + j
+        total += grid.phi.size
+    counts = np.array([len(s.nodes) for s in shapes], dtype=np.int32)
+    return {
+        "ls_phi": np.concatenate(phis) if phis else np.zeros(0),
+        "ls_offset": ls_offset,
+        "ls_shape": ls_shape,
+        "ls_origin": ls_origin,
+        "ls_spacing": ls_spacing,
+        "node_pos": _concat([s.nodes for s in shapes], (0, 2)),
+        "node_len": _concat([s.node_lengths for s in shapes], (0,)),
+        "node_normal": _concat([s.node_normals for s in shapes], (0, 2)),
+        "node_offset": (np.cumsum(counts) - counts).astype(np.int32),
+        "node_count": counts,
+        "is_circle": np.array([s.kind == "circle" for s in shapes], dtype=np.int32),
+        "radius": np.array([s.radius for s in shapes], dtype=float),
+        "bounding_radius": np.array([s.bounding_radius for s in shapes], dtype=float),
+    }
+
+
+# ---------------------------------------------------------------------------
+# Internals
+# ---------------------------------------------------------------------------
+
+
+def _positive(name, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def _node_count(n_nodes) -> int:
+    try:
+        n = operator.index(n_nodes)
+    except TypeError:
+        raise ValueError(f"n_nodes must be an integer, got {n_nodes!r}") from None
+    if n < 3:
+        raise ValueError(f"n_nodes must be >= 3, got {n}")
+    return n
+
+
+def _box(width, height) -> np.ndarray:
+    hw, hh = 0.5 * width, 0.5 * height
+    return np.array([[-hw, -hh], [hw, -hh], [hw, hh], [-hw, hh]])
+
+
+def _frozen(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+def _concat(arrays, empty_shape) -> np.ndarray:
+    return np.concatenate(arrays) if arrays else np.zeros(empty_shape)
+
+
+def _make_shape(*, name, kind, vertices, area, perimeter, inertia_per_mass, bounding_radius,
+                nodes, node_lengths, node_normals) -> Shape:
+    return Shape(
+        name=name,
+        kind=kind,
+        radius=float(bounding_radius),
+        vertices=None if vertices is None else _frozen(vertices),
+        area=float(area),
+        perimeter=float(perimeter),
+        inertia_per_mass=float(inertia_per_mass),
+        bounding_radius=float(bounding_radius),
+        equivalent_diameter=math.sqrt(4.0 * area / math.pi),
+        sphericity=math.sqrt(4.0 * math.pi * area) / perimeter,
+        nodes=_frozen(nodes),
+        node_lengths=_frozen(node_lengths),
+        node_normals=_frozen(node_normals),
+    )
+
+
+def _cross(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _point_segment_distance(p, a, b) -> np.ndarray:
+    """Distance from points ``p`` to segments ``a``-``b`` (all broadcast)."""
+    ab = b - a
+    ap = p - a
+    t = np.clip(np.sum(ap * ab, axis=-1) / np.sum(ab * ab, axis=-1), 0.0, 1.0)
+    d = ap - t[..., None] * ab
+    return np.hypot(d[..., 0], d[..., 1])
+
+
+def _polygon_sdf(vertices, points) -> np.ndarray:
+    a = vertices
+    b = np.roll(vertices, -1, axis=0)
+    q = points[:, None, :]
+    dist = _point_segment_distance(q, a, b).min(axis=1)
+    # Even-odd crossing count of a ray towards +x; the half-open test on y counts
+    # a ray through a vertex once. Horizontal edges never straddle, so their
+    # (unused) crossing abscissa is computed with a dummy slope.
+    ay, by = a[:, 1], b[:, 1]
+    straddle = (ay > q[..., 1]) != (by > q[..., 1])
+    dy = np.where(by == ay, 1.0, by - ay)
+    x_cross = a[:, 0] + (q[..., 1] - ay) * (b[:, 0] - a[:, 0]) / dy
+    inside = np.count_nonzero(straddle & (q[..., 0] < x_cross), axis=1) % 2 == 1
+    return np.where(inside, -dist, dist)
+
+
+def _proper_crossings(p1, p2, q1, q2, tol) -> np.ndarray:
+    """Whether segments p1-p2 and q1-q2 cross at a point interior to both.
+
+    Each endpoint must lie farther than ``tol`` from the other segment's line,
+    on opposite sides, so touching and collinear segments do not count.
+    """
+
+    def sides(a, b, c, d):
+        ab = b - a
+        length = np.hypot(ab[..., 0], ab[..., 1])
+        sc = _cross(ab, c - a) / length
+        sd = _cross(ab, d - a) / length
+        return ((sc > tol) & (sd < -tol)) | ((sc < -tol) & (sd > tol))
+
+    return sides(q1, q2, p1, p2) & sides(p1, p2, q1, q2)
+
+
+def _piece_midpoints(v, others, tol) -> np.ndarray:
+    """Midpoints of the pieces into which the points ``others`` lying on the
+    closed polygon ``v``'s edges cut those edges.
+
+    Without proper crossings, the other outline meets an edge only at its own
+    vertices or along a shared stretch that ends at one, so each piece lies
+    wholly inside, outside or on the other shape, and its midpoint tells which.
+    """
+    a = v[:, None]
+    ab = np.roll(v, -1, axis=0)[:, None] - a
+    t = np.sum((others[None] - a) * ab, axis=-1) / np.sum(ab * ab, axis=-1)
+    on_edge = _point_segment_distance(others[None], a, a + ab) <= tol
+    # Points off an edge are moved to its end, where they only add empty pieces.
+    t = np.where(on_edge, np.clip(t, 0.0, 1.0), 1.0)
+    ends = np.ones((len(v), 1))
+    t = np.sort(np.hstack([np.zeros_like(ends), t, ends]), axis=1)
+    mid = 0.5 * (t[:, 1:] + t[:, :-1])
+    return (a + mid[..., None] * ab).reshape(-1, 2)
+
+
+def _check_outline(vertices) -> np.ndarray:
+    """Validate a user's polygon; messages use the user's vertex numbering.
+
+    Points within 1e-12 of the outline's size count as coincident: only exact
+    repeats and touches survive the floating-point input, and anything coarser
+    would refuse legitimate thin features.
+    """
+    v = np.asarray(vertices, dtype=float)
+    if v.ndim != 2 or v.shape[1] != 2:
+        raise ValueError(f"polygon vertices must be a list of [x, y] pairs, got shape {v.shape}")
+    nv = len(v)
+    if nv < 3:
+        raise ValueError(f"a polygon needs at least 3 vertices, got {nv}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError("polygon vertices must be finite numbers")
+    tol = 1e-12 * float(np.ptp(v, axis=0).max())
+    dist = np.hypot(*(v[:, None, :] - v[None, :, :]).transpose(2, 0, 1))
+    i, j = np.nonzero(np.triu(dist <= tol, k=1))
+    if len(i):
+        raise ValueError(
+            f"polygon vertices {i[0]} and {j[0]} are the same point "
+            "(give each vertex once; the outline closes itself)"
+        )
+    a = v
+    b = np.roll(v, -1, axis=0)
+    # Edges that share no vertex must not meet at all (crossing or touching).
+    ea, eb = np.triu_indices(nv, k=2)
+    keep = ~((ea == 0) & (eb == nv - 1))
+    ea, eb = ea[keep], eb[keep]
+    meet = _proper_crossings(a[ea], b[ea], a[eb], b[eb], tol)
+    for p, (s, e) in ((a[ea], (a[eb], b[eb])), (b[ea], (a[eb], b[eb])),
+                      (a[eb], (a[ea], b[ea])), (b[eb], (a[ea], b[ea]))):
+        meet |= _point_segment_distance(p, s, e) <= tol
+    if meet.any():
+        k = np.argmax(meet)
+        raise ValueError(f"polygon edges {ea[k]} and {eb[k]} cross (the outline must be a simple polygon)")
+    # Neighbouring edges need no test of their own: one folding back onto the
+    # other puts a vertex on a non-neighbouring edge (caught above) or, for a
+    # triangle, leaves no area.
+    if abs(_signed_area(v)) <= 1e-12 * float(np.ptp(v, axis=0).max()) ** 2:
+        raise ValueError("polygon has zero area (its vertices are collinear)")
+    return v
+
+
+def _signed_area(v) -> float:
+    return 0.5 * float(np.sum(_cross(v, np.roll(v, -1, axis=0))))
+
+
+def _polygon_shape(vertices, n_nodes, name, centred=False) -> Shape:
+    """Shape from an outline; ``centred``: the outline's centroid is the origin
+    by symmetry, so skip the shift that would only add round-off to it."""
+    v = _check_outline(vertices)
+    n = _node_count(n_nodes)
+    if n < len(v):
+        raise ValueError(f"n_nodes={n} is fewer than the polygon's {len(v)} vertices")
+    if _signed_area(v) < 0:
+        v = v[::-1]
+    w = np.roll(v, -1, axis=0)
+    c = _cross(v, w)
+    area = 0.5 * c.sum()
+    if not centred:
+        centroid = ((v + w) * c[:, None]).sum(axis=0) / (6.0 * area)
+        v = v - centroid
+        w = w - centroid
+        c = _cross(v, w)
+    # Polar moment of area of the triangle fan from the (now centroidal) origin.
+    polar = np.sum(c * (np.sum(v * v, axis=1) + np.sum(v * w, axis=1) + np.sum(w * w, axis=1))) / 12.0
+    nodes, lengths, normals = _polygon_nodes(v, n)
+    edge_len = np.hypot(*(w - v).T)
+    return _make_shape(
+        name=name,
+        kind="polygon",
+        vertices=v,
+        area=area,
+        perimeter=edge_len.sum(),
+        inertia_per_mass=polar / area,
+        bounding_radius=np.hypot(v[:, 0], v[:, 1]).max(),
+        nodes=nodes,
+        node_lengths=lengths,
+        node_normals=normals,
+    )
+
+
+def _edge_counts(lengths, n) -> np.ndarray:
+    """Split ``n`` sub-intervals over edges in proportion to their lengths.
+
+    Largest-remainder rounding with at least one interval per edge, so that
+    every vertex is a node and the spacing is as even as whole numbers allow.
+    """
+    ideal = n * lengths / lengths.sum()
+    counts = np.maximum(np.floor(ideal).astype(int), 1)
+    while counts.sum() < n:
+        counts[np.argmax(ideal - counts)] += 1
+    # Reached only when the one-per-edge floor overshot: take back from the
+    # edges furthest above their share.
+    while counts.sum() > n:
+        counts[np.argmax(np.where(counts > 1, counts - ideal, -np.inf))] -= 1
+    return counts
+
+
+def _polygon_nodes(v, n):
+    edges = np.roll(v, -1, axis=0) - v
+    lengths = np.hypot(edges[:, 0], edges[:, 1])
+    counts = _edge_counts(lengths, n)
+    frac = np.concatenate([np.arange(m) / m for m in counts])
+    edge = np.repeat(np.arange(len(v)), counts)
+    nodes = v[edge] + frac[:, None] * edges[edge]
+    edge_normals = np.column_stack([edges[:, 1], -edges[:, 0]]) / lengths[:, None]
+    normals = edge_normals[edge]
+    bisector = edge_normals + np.roll(edge_normals, 1, axis=0)
+    first = np.cumsum(counts) - counts  # node index of each vertex
+    normals[first] = bisector / np.hypot(bisector[:, 0], bisector[:, 1])[:, None]
+    segment = np.repeat(lengths / counts, counts)  # node i to node i + 1
+    node_lengths = 0.5 * (segment + np.roll(segment, 1))
+    return nodes, node_lengths, normals
