@@ -23,7 +23,9 @@ is double-buffered (read ``old``, the owner writes ``new``) so that both threads
 see the same history.
 
 With ``normalize`` (the paper's choice) the resultant force and moment of one
-direction of one contact are divided by its number of nodes in contact.
+direction of one contact are divided by its number of nodes in contact. When both
+directions see a contact (two disks, two faces) the pair's resultant is their
+mean; a corner driven into a face is seen by one direction only and counts alone.
 
 Disks (every particle a circle) take the analytic path: one contact point per
 pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
@@ -73,10 +75,14 @@ def spin(w, r):
 
 
 @ti.func
-def grid_sample(data: ti.template(), off, nx, ny, ox, oy, h, q):
+def grid_sample(data: ti.template(), gdata: ti.template(), off, nx, ny, ox, oy, h, q):
     """Bilinear value and gradient of a grid stored x-first from ``data[off]``.
 
-    Outside the grid the value is ``BIG`` (no contact) and the gradient zero.
+    The gradient is the bilinear interpolation of the grid's central-difference
+    gradient ``gdata`` (continuous and second-order), not the gradient of the
+    bilinear value, which jumps between cells and tilts contact normals by O(h/r)
+    next to grid lines. Outside the grid the value is ``BIG`` (no contact) and
+    the gradient zero.
     """
     phi = BIG
     grad = vec2(0.0, 0.0)
@@ -87,13 +93,16 @@ def grid_sample(data: ti.template(), off, nx, ny, ox, oy, h, q):
         j0 = ti.cast(ti.floor(gy), ti.i32)
         fx = gx - i0
         fy = gy - j0
-        a = data[off + i0 * ny + j0]
-        b = data[off + (i0 + 1) * ny + j0]
-        c = data[off + i0 * ny + j0 + 1]
-        d = data[off + (i0 + 1) * ny + j0 + 1]
-        phi = a * (1 - fx) * (1 - fy) + b * fx * (1 - fy) + c * (1 - fx) * fy + d * fx * fy
-        grad = vec2(((b - a) * (1 - fy) + (d - c) * fy) / h,
-                    ((c - a) * (1 - fx) + (d - b) * fx) / h)
+        k00 = off + i0 * ny + j0
+        k10 = k00 + ny
+        w00 = (1 - fx) * (1 - fy)
+        w10 = fx * (1 - fy)
+        w01 = (1 - fx) * fy
+        w11 = fx * fy
+        phi = data[k00] * w00 + data[k10] * w10 + data[k00 + 1] * w01 + data[k10 + 1] * w11
+        for c in ti.static(range(2)):
+            grad[c] = (gdata[k00, c] * w00 + gdata[k10, c] * w10 + gdata[k00 + 1, c] * w01
+                       + gdata[k10 + 1, c] * w11)
     return phi, grad
 
 
@@ -134,9 +143,10 @@ def store_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.templat
 
 
 @ti.func
-def wall_depth(wall: ti.template(), wall_meta: ti.template(), prm: ti.template(), p):
+def wall_depth(wall: ti.template(), wall_grad: ti.template(), wall_meta: ti.template(),
+               prm: ti.template(), p):
     """Wall level set (positive in the fluid) and its gradient at world point ``p``."""
-    phi, g = grid_sample(wall, 0, wall_meta[0], wall_meta[1],
+    phi, g = grid_sample(wall, wall_grad, 0, wall_meta[0], wall_meta[1],
                          prm[P_WALL_OX], prm[P_WALL_OY], prm[P_WALL_H], p)
     return phi, g
 
@@ -148,9 +158,9 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                 nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
                 sp: ti.types.ndarray(), tm: ti.types.ndarray(), mass: ti.types.ndarray(),
                 deq: ti.types.ndarray(), pair: ti.types.ndarray(), wallp: ti.types.ndarray(),
-                ls_phi: ti.types.ndarray(), ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
+                ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(), ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
                 node_pos: ti.types.ndarray(), node_meta: ti.types.ndarray(),
-                wall: ti.types.ndarray(), wall_meta: ti.types.ndarray(), hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
+                wall: ti.types.ndarray(), wall_grad: ti.types.ndarray(), wall_meta: ti.types.ndarray(), hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
                 hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(),
                 prm: ti.types.ndarray(), max_overlap: ti.types.ndarray(), flags: ti.types.ndarray(),
                 slots: ti.template()):
@@ -198,7 +208,7 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             for k in range(nn_i):
                 p = xi + rot(ci, si, vec2(node_pos[noff_i + k, 0], node_pos[noff_i + k, 1]))
                 qb = rot_t(cj, sj, p - xj)
-                phi, g = grid_sample(ls_phi, ls_meta[tj, 0], ls_meta[tj, 1], ls_meta[tj, 2],
+                phi, g = grid_sample(ls_phi, ls_grad, ls_meta[tj, 0], ls_meta[tj, 1], ls_meta[tj, 2],
                                      ls_geo[tj, 0], ls_geo[tj, 1], ls_geo[tj, 2], qb)
                 if phi < 0.0 and g.norm() > 0.0:
                     nrm = rot(cj, sj, g.normalized())
@@ -218,7 +228,7 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             for k in range(node_meta[tj, 1]):
                 p = xj + rot(cj, sj, vec2(node_pos[noff_j + k, 0], node_pos[noff_j + k, 1]))
                 qb = rot_t(ci, si, p - xi)
-                phi, g = grid_sample(ls_phi, ls_meta[ti_, 0], ls_meta[ti_, 1], ls_meta[ti_, 2],
+                phi, g = grid_sample(ls_phi, ls_grad, ls_meta[ti_, 0], ls_meta[ti_, 1], ls_meta[ti_, 2],
                                      ls_geo[ti_, 0], ls_geo[ti_, 1], ls_geo[ti_, 2], qb)
                 if phi < 0.0 and g.norm() > 0.0:
                     nrm = rot(ci, si, g.normalized())
@@ -235,8 +245,11 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                 if nb > 0:
                     fb /= nb
                     mb /= nb
-            ftot += fa + fb
-            mtot += ma + mb
+            # Both directions estimate the same contact: average them when both see
+            # it, so a pair is not twice as stiff as a body against a wall.
+            both = 0.5 if na > 0 and nb > 0 else 1.0
+            ftot += both * (fa + fb)
+            mtot += both * (ma + mb)
         # Walls: nodes of i against the static wall level set.
         a = sp[i]
         kn = wallp[a, PAIR_KN]
@@ -248,7 +261,7 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
         nw = 0
         for k in range(nn_i):
             p = xi + rot(ci, si, vec2(node_pos[noff_i + k, 0], node_pos[noff_i + k, 1]))
-            phi, g = wall_depth(wall, wall_meta, prm, p)
+            phi, g = wall_depth(wall, wall_grad, wall_meta, prm, p)
             if phi < 0.0 and g.norm() > 0.0:
                 nrm = g.normalized()
                 u = vi + spin(wi, p - xi)
@@ -274,7 +287,7 @@ def disk_contacts(x: ti.types.ndarray(), v: ti.types.ndarray(), w: ti.types.ndar
                   nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
                   sp: ti.types.ndarray(), rad: ti.types.ndarray(), mass: ti.types.ndarray(),
                   pair: ti.types.ndarray(), wallp: ti.types.ndarray(), wall: ti.types.ndarray(),
-                  wall_meta: ti.types.ndarray(),
+                  wall_grad: ti.types.ndarray(), wall_meta: ti.types.ndarray(),
                   hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
                   hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(),
                   prm: ti.types.ndarray(), max_overlap: ti.types.ndarray(), flags: ti.types.ndarray(),
@@ -323,7 +336,7 @@ def disk_contacts(x: ti.types.ndarray(), v: ti.types.ndarray(), w: ti.types.ndar
                 ftot += fn + fs
                 mtot += cross(ra, fs)
                 deepest = ti.max(deepest, depth / (2.0 * ri))
-        phi, g = wall_depth(wall, wall_meta, prm, xi)
+        phi, g = wall_depth(wall, wall_grad, wall_meta, prm, xi)
         depth = ri - phi
         if depth > 0.0 and g.norm() > 0.0:
             nrm = g.normalized()

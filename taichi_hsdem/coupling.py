@@ -32,13 +32,14 @@ def boundary_vectors(nodes: np.ndarray) -> np.ndarray:
 
 
 @ti.func
-def inside_body(tm, is_circle: ti.template(), trad: ti.template(), ls_phi: ti.template(), ls_meta: ti.template(), ls_geo: ti.template(), q):
+def inside_body(tm, is_circle: ti.template(), trad: ti.template(), ls_phi: ti.template(),
+                ls_grad: ti.template(), ls_meta: ti.template(), ls_geo: ti.template(), q):
     """Is body-frame point ``q`` inside template ``tm``."""
     inside = False
     if is_circle[tm] != 0:
         inside = q.norm() <= trad[tm]
     else:
-        phi, g = grid_sample(ls_phi, ls_meta[tm, 0], ls_meta[tm, 1], ls_meta[tm, 2],
+        phi, g = grid_sample(ls_phi, ls_grad, ls_meta[tm, 0], ls_meta[tm, 1], ls_meta[tm, 2],
                              ls_geo[tm, 0], ls_geo[tm, 1], ls_geo[tm, 2], q)
         inside = phi <= 0.0
     return inside
@@ -49,7 +50,7 @@ def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
                            alive: ti.types.ndarray(), sp: ti.types.ndarray(),
                            tm: ti.types.ndarray(), rb: ti.types.ndarray(),
                            kp: ti.types.ndarray(), is_circle: ti.types.ndarray(),
-                           trad: ti.types.ndarray(), ls_phi: ti.types.ndarray(),
+                           trad: ti.types.ndarray(), ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(),
                            ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
                            base: ti.types.ndarray(), kappa: ti.types.ndarray(),
                            fg: ti.types.ndarray()):
@@ -74,7 +75,7 @@ def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
             for b in range(j0, j1 + 1):
                 if base[a, b] > 0.0:
                     centre = vec2(ox + (a + 0.5) * h, oy + (b + 0.5) * h)
-                    if inside_body(tm[i], is_circle, trad, ls_phi, ls_meta, ls_geo,
+                    if inside_body(tm[i], is_circle, trad, ls_phi, ls_grad, ls_meta, ls_geo,
                                    rot_t(c, s, centre - xi)):
                         ti.atomic_min(kappa[r, a, b], kp[sp[i]])
 

@@ -5,7 +5,8 @@
     x     <- x + dt v,   theta <- theta + dt omega
 
 ``xi`` is per species (``damping.xi = "auto"`` depends on the density). The same
-kernel watches for what makes a step untrustworthy: non-finite values and bodies
+kernel adds the external loads ``f_ext``, ``tau_ext`` (zero unless set through
+:meth:`Simulation.set_external_load`) and watches for what makes a step untrustworthy: non-finite values and bodies
 moving more than a quarter of their size in one step (flag per realization), and
 a body that has moved half the Verlet skin since the last neighbour build (asks
 for a rebuild). It also counts bodies crossing the escape line and parks them.
@@ -25,7 +26,7 @@ N_IPARAMS = 3
 @ti.kernel
 def advance(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray(),
             w: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray(),
-            alive: ti.types.ndarray(), running: ti.types.ndarray(),
+            f_ext: ti.types.ndarray(), tau_ext: ti.types.ndarray(), alive: ti.types.ndarray(), running: ti.types.ndarray(),
             sp: ti.types.ndarray(), mass: ti.types.ndarray(), inertia: ti.types.ndarray(),
             deq: ti.types.ndarray(), xi: ti.types.ndarray(), x_ref: ti.types.ndarray(),
             prm: ti.types.ndarray(), bad: ti.types.ndarray(), escaped: ti.types.ndarray(),
@@ -37,8 +38,8 @@ def advance(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray()
         if running[r] == 0 or alive[r, i] == 0:
             continue
         damp = xi[sp[i]] * dt * 0.5
-        vn = ((1.0 - damp) * v[r, i] + dt * f[r, i] / mass[i]) / (1.0 + damp)
-        wn = ((1.0 - damp) * w[r, i] + dt * tau[r, i] / inertia[i]) / (1.0 + damp)
+        vn = ((1.0 - damp) * v[r, i] + dt * (f[r, i] + f_ext[r, i]) / mass[i]) / (1.0 + damp)
+        wn = ((1.0 - damp) * w[r, i] + dt * (tau[r, i] + tau_ext[r, i]) / inertia[i]) / (1.0 + damp)
         xn = x[r, i] + dt * vn
         v[r, i] = vn
         w[r, i] = wn

@@ -134,16 +134,13 @@ def critical_time_step(species: list[Species], all_disks: bool, normalize: bool)
     """``2 / omega_max`` over every species pair and every species against a wall.
 
     ``omega^2`` is the larger of ``k_n,eff / m_eff`` (normal) and ``k_s,eff / m_t``
-    (tangential, ``1/m_t`` adding each body's ``1/m + r_b^2/I``). Level-set contacts
-    count both directions of a pair, and without normalisation every node of the
-    longest straight edge can be in contact at once.
+    (tangential, ``1/m_t`` adding each body's ``1/m + r_b^2/I``). Without
+    normalisation every node of the longest straight edge can be in contact at once.
     """
-    if all_disks:
+    if all_disks or normalize:
         factor = 1.0
-    elif normalize:
-        factor = 2.0
     else:
-        factor = 2.0 * max(_face_nodes(s.shape) for s in species)
+        factor = float(max(_face_nodes(s.shape) for s in species))
     omega2 = 0.0
     for a in species:
         inv_ta = 1.0 / a.mass + a.shape.bounding_radius ** 2 / a.inertia
@@ -189,7 +186,7 @@ def resolve(scene: Scene) -> Model:
     d_min, d_max = min(d_eq), max(d_eq)
     values: dict = {}
     notes: dict[str, str] = {}
-    all_disks = all(t.kind == "circle" for t in templates)
+    all_disks = scene.contact.disk_fast_path and all(t.kind == "circle" for t in templates)
 
     # Walls.
     g = scene.geometry

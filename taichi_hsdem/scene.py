@@ -299,6 +299,8 @@ class ContactConfig(_Config):
     overlap_limit: float = _key("float", "deepest overlap before a realization is "
                                 "stopped as unstable, fraction of d_eq", 0.25, gt=0,
                                 lt=1)
+    disk_fast_path: bool = _key("bool", "use analytic disk contacts when every particle "
+                                "is a circle (false: level sets for disks too)", True)
 
 
 @_document

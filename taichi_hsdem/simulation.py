@@ -36,6 +36,12 @@ DISK_HISTORY_SLOTS = 8        # contacts one disk can remember at once
 SKIN_FRACTION = 0.25          # Verlet skin as a fraction of the smallest d_eq
 
 
+def _grid_gradient(phi: np.ndarray, h: float) -> np.ndarray:
+    """Central-difference gradient of an x-first grid, flattened to (nx*ny, 2)."""
+    gx, gy = np.gradient(phi, h)
+    return np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+
 class RunError(RuntimeError):
     """The run failed for a reason the user must act on (message says what)."""
 
@@ -112,6 +118,11 @@ class Simulation:
         self._stack = stk
         ls_phi = stk["ls_phi"] if stk["ls_phi"].size else np.zeros(1)
         self.ls_phi = arr(ls_phi)
+        ls_grad = np.zeros((ls_phi.size, 2))
+        for off, (nx, ny), h in zip(stk["ls_offset"], stk["ls_shape"], stk["ls_spacing"]):
+            if nx:
+                ls_grad[off:off + nx * ny] = _grid_gradient(ls_phi[off:off + nx * ny].reshape(nx, ny), h)
+        self.ls_grad = arr(ls_grad)
         self.ls_meta = arr(np.column_stack([stk["ls_offset"], stk["ls_shape"]]), ti.i32)
         self.ls_geo = arr(np.column_stack([stk["ls_origin"], stk["ls_spacing"]]))
         self.node_pos = arr(stk["node_pos"])
@@ -136,6 +147,7 @@ class Simulation:
         self.kp = arr(np.array([s.kappa for s in sp_list]))
         wf = m.wall_field
         self.wall = arr(wf.phi.ravel())
+        self.wall_grad = arr(_grid_gradient(wf.phi, wf.spacing))
         self.wall_meta = arr(np.array(wf.phi.shape), ti.i32)
         self.prm = arr(np.array([m.dt, 1.0 if self.scene.contact.normalize_by_nodes else 0.0,
                                  wf.origin[0], wf.origin[1], wf.spacing]))
@@ -148,15 +160,17 @@ class Simulation:
         self.w = ti.ndarray(real, shape=(R, N))
         self.f = vec((R, N))
         self.tau = ti.ndarray(real, shape=(R, N))
+        self.f_ext = vec((R, N))
+        self.tau_ext = ti.ndarray(real, shape=(R, N))
         self.alive = ti.ndarray(ti.i32, shape=(R, N))
         self.running = arr(np.ones(R, dtype=np.int32), ti.i32)
         self.escaped = ti.ndarray(ti.i32, shape=R)
         self.bad = ti.ndarray(ti.i32, shape=R)
         self.max_overlap = ti.ndarray(real, shape=R)
         self.flags = ti.ndarray(ti.i32, shape=neighbors.N_FLAGS)
-        for a in (self.th, self.w, self.tau, self.max_overlap):
+        for a in (self.th, self.w, self.tau, self.tau_ext, self.max_overlap):
             a.fill(0)
-        for a in (self.x, self.v, self.f):
+        for a in (self.x, self.v, self.f, self.f_ext):
             a.fill(0)
         for a in (self.alive, self.escaped, self.bad, self.flags):
             a.fill(0)
@@ -238,6 +252,14 @@ class Simulation:
         if self.fluid is not None:
             self._update_fluid(force=True)
 
+    def set_external_load(self, force=None, moment=None):
+        """Constant external force (R, N, 2) and moment (R, N) on every body, e.g. gravity."""
+        R, N = self.R, self.N
+        self.f_ext.from_numpy(np.ascontiguousarray(np.broadcast_to(
+            np.asarray(0.0 if force is None else force, dtype=float), (R, N, 2)), dtype=self._npr))
+        self.tau_ext.from_numpy(np.ascontiguousarray(np.broadcast_to(
+            np.asarray(0.0 if moment is None else moment, dtype=float), (R, N)), dtype=self._npr))
+
     def _rebuild(self):
         self.nlist.build(self.x, self.alive, self.running, self.rb, self.flags)
 
@@ -257,7 +279,7 @@ class Simulation:
     def step(self, n: int = 1):
         """Advance every running realization by ``n`` DEM steps (no host checks)."""
         from . import contact, coupling, integrate
-        from .neighbors import F_REBUILD, F_HISTORY_OVERFLOW
+        from .neighbors import F_REBUILD
         m = self.model
         for _ in range(n):
             if self.fluid is not None:
@@ -271,29 +293,26 @@ class Simulation:
                 contact.disk_contacts(self.x, self.v, self.w, self.f, self.tau, self.alive,
                                       self.running, self.nlist.nbr, self.nlist.nbr_n, self.sp,
                                       self.rad, self.mass, self.pair, self.wallp, self.wall,
-                                      self.wall_meta, hp_old, hs_old, hp_new, hs_new, self.prm,
+                                      self.wall_grad, self.wall_meta, hp_old, hs_old, hp_new, hs_new, self.prm,
                                       self.max_overlap, self.flags, self.slots)
             else:
                 contact.ls_contacts(self.x, self.th, self.v, self.w, self.f, self.tau, self.alive,
                                     self.running, self.nlist.nbr, self.nlist.nbr_n, self.sp,
                                     self.tm, self.mass, self.deq, self.pair, self.wallp,
-                                    self.ls_phi, self.ls_meta, self.ls_geo, self.node_pos,
-                                    self.node_meta, self.wall, self.wall_meta, hp_old, hs_old,
+                                    self.ls_phi, self.ls_grad, self.ls_meta, self.ls_geo,
+                                    self.node_pos, self.node_meta, self.wall, self.wall_grad,
+                                    self.wall_meta, hp_old, hs_old,
                                     hp_new, hs_new, self.prm, self.max_overlap, self.flags,
                                     self.slots)
             self.hist.reverse()
-            integrate.advance(self.x, self.th, self.v, self.w, self.f, self.tau, self.alive,
+            integrate.advance(self.x, self.th, self.v, self.w, self.f, self.tau, self.f_ext,
+                              self.tau_ext, self.alive,
                               self.running, self.sp, self.mass, self.inertia, self.deq, self.xi,
                               self.nlist.x_ref, self.iprm, self.bad, self.escaped, self.flags)
             self.t += self.dt
             self.steps += 1
-            fl = self.flags.to_numpy()
-            if fl[F_REBUILD]:
+            if self.flags[F_REBUILD]:
                 self._rebuild()
-            if fl[F_HISTORY_OVERFLOW]:
-                self.history_overflows += int(fl[F_HISTORY_OVERFLOW])
-                fl[F_HISTORY_OVERFLOW] = 0
-                self.flags.from_numpy(fl)
 
     # ------------------------------------------------------------------ fluid
     def _update_fluid(self, force=False):
@@ -301,7 +320,7 @@ class Simulation:
         m = self.model
         coupling.rasterize_permeability(self.x, self.th, self.alive, self.sp, self.tm, self.rb,
                                         self.kp, self.is_circle, self.trad, self.ls_phi,
-                                        self.ls_meta, self.ls_geo, self.base, self.kappa, self.fg)
+                                        self.ls_grad, self.ls_meta, self.ls_geo, self.base, self.kappa, self.fg)
         kappa = self.kappa.to_numpy().astype(float)
         self.fluid_updates += 1
         if not force and self._kappa_solved is not None:
@@ -327,6 +346,11 @@ class Simulation:
         """Host-side checks every CHECK_INTERVAL steps; returns True while anything runs."""
         m = self.model
         sc = self.scene
+        from .neighbors import F_HISTORY_OVERFLOW
+        lost = int(self.flags[F_HISTORY_OVERFLOW])
+        if lost:
+            self.history_overflows += lost
+            self.flags[F_HISTORY_OVERFLOW] = 0
         running = self.running.to_numpy()
         escaped = self.escaped.to_numpy().astype(np.int64)
         bad = self.bad.to_numpy()
