@@ -76,7 +76,10 @@ def _say(quiet, msg):
 
 
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:          # --help (0) or a bad argument (2)
+        return exc.code
     from .scene import SceneError, load_scene
     overrides = list(args.set)
     if args.arch is not None:
@@ -114,14 +117,15 @@ def main(argv=None) -> int:
          f"({'disk' if sim.model.all_disks else 'level-set'} contacts), arch {sim.arch} -> {out}")
     recorder = None
     frame_times = None
+    video_skipped = None
     if sim.scene.output.video:
         from .render import vulkan_status
         ok, why = vulkan_status()
         if ok:
-            import numpy as np
             recorder = VideoRecorder(sim, out / "video.mp4")
-            frame_times = list(np.linspace(0.0, sim.scene.run.t_end, sim.scene.output.frames))
+            frame_times = recorder.frame_times
         else:
+            video_skipped = why
             _say(args.quiet, f"rendering skipped: {why}")
     progress = _Progress(args.quiet, sim.scene.run.t_end)
     try:
@@ -142,8 +146,11 @@ def main(argv=None) -> int:
     progress.close()
     if recorder is not None:
         recorder.close(keep=True)
-        result.summary["video"] = {"frames": recorder.frames, "render_seconds": recorder.seconds,
-                                   "file": "video.mp4"}
+        result.summary["video"] = recorder.summary(result.summary["wall_time_s"])
+        if recorder.error is not None:
+            print(f"video not written: rendering failed ({recorder.error})", file=sys.stderr)
+    elif video_skipped is not None:
+        result.summary["video"] = {"file": None, "skipped": video_skipped}
     statuses = [r["status"] for r in result.summary["realizations"]]
     write_summary(result.summary, out)
     write_series(result.series, statuses, out)

@@ -222,9 +222,9 @@ def resolve(scene: Scene) -> Model:
             kps.append(0.0)
     fluid_dx = None
     if f.enabled:
-        fluid_dx = d_min / 8.0 if f.cell_size == "auto" else f.cell_size
+        fluid_dx = d_min / 6.0 if f.cell_size == "auto" else f.cell_size
         if f.cell_size == "auto":
-            notes["fluid.cell_size"] = "smallest particle d_eq / 8"
+            notes["fluid.cell_size"] = "smallest particle d_eq / 6"
         elif fluid_dx > d_min / MIN_FLUID_CELLS_PER_DIAMETER:
             bad("fluid.cell_size", f"{fluid_dx:g} is too coarse for particles of d = {d_min:g}: "
                 f"a particle must span at least {MIN_FLUID_CELLS_PER_DIAMETER:g} cells "
@@ -250,14 +250,16 @@ def resolve(scene: Scene) -> Model:
                                              f"volume x in [{region[0]:g}, {region[1]:g}]")
         mass = sp.density * t.area * (f.gap if f.gap else 1.0)
         inertia = mass * t.inertia_per_mass
-        ls = None
-        if t.kind != "circle" or not all_disks:
-            ls = t.equivalent_diameter / 40.0 if sp.ls_spacing == "auto" else sp.ls_spacing
-            if sp.ls_spacing != "auto" and ls > t.equivalent_diameter / MIN_LS_CELLS_PER_DIAMETER:
-                bad(f"{key}.ls_spacing", f"{ls:g} is too coarse for a particle of d = "
-                    f"{t.equivalent_diameter:g}: use at most d/{MIN_LS_CELLS_PER_DIAMETER:g}")
-            values[f"particles.{k}.ls_spacing"] = ls
-        if scene.damping.xi == "auto":
+        ls = t.equivalent_diameter / 40.0 if sp.ls_spacing == "auto" else sp.ls_spacing
+        if sp.ls_spacing != "auto" and ls > t.equivalent_diameter / MIN_LS_CELLS_PER_DIAMETER:
+            bad(f"{key}.ls_spacing", f"{ls:g} is too coarse for a particle of d = "
+                f"{t.equivalent_diameter:g}: use at most d/{MIN_LS_CELLS_PER_DIAMETER:g}")
+        values[f"particles.{k}.ls_spacing"] = ls
+        if all_disks:
+            notes[f"particles.{k}.ls_spacing"] = "not used: disks take the analytic path"
+        if sp.xi is not None:
+            xi = float(sp.xi)
+        elif scene.damping.xi == "auto":
             if f.enabled:
                 beta = (kappa_free - kp) / (kappa_free + kp)
                 xi = (1.0 + beta) * f.viscosity / (sp.density * kappa_free)
@@ -272,9 +274,13 @@ def resolve(scene: Scene) -> Model:
                                inertia=inertia, d_eq=t.equivalent_diameter, kn=0.0, ks=0.0,
                                friction=sp.friction, restitution=sp.restitution, xi=xi,
                                kappa=kp, ls_spacing=ls))
+    # "auto" depends on each species' density and permeability: record every
+    # species' value, and as damping.xi their count-weighted mean (then unused).
+    for k, s in enumerate(species):
+        values[f"particles.{k}.xi"] = s.xi
     if scene.damping.xi == "auto":
-        # one value per species; the scene records that of the first
-        values["damping.xi"] = species[0].xi
+        counts = np.array([max(s.count, 1) for s in species], dtype=float)
+        values["damping.xi"] = float(np.average([s.xi for s in species], weights=counts))
     if problems:
         raise SceneError(problems)
 

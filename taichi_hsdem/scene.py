@@ -277,6 +277,9 @@ class SpeciesConfig(_Config):
     nodes: int = _key("int", "surface nodes (at least the shape's vertices)", 40, ge=3)
     ls_spacing: float | str = _key("float", 'level-set grid spacing, m; "auto": d_eq '
                                    "/ 40", AUTO, auto=True, gt=0)
+    xi: float | None = _key("float", "global damping of this species, 1/s; unset: "
+                            "damping.xi (the resolved scene records each species' value)",
+                            None, ge=0)
 
     def area(self) -> float:
         """Area of the shape, m^2."""
