@@ -149,7 +149,9 @@ def pressure_forces(x: ti.types.ndarray(), th: ti.types.ndarray(),
 
 
 @ti.kernel
-def clear_forces(f: ti.types.ndarray(), tau: ti.types.ndarray()):
+def load_forces(f: ti.types.ndarray(), tau: ti.types.ndarray(), f0: ti.types.ndarray(),
+                tau0: ti.types.ndarray()):
+    """Start a step's force sums from the held fluid forces ``f0``, ``tau0``."""
     for r, i in f:
-        f[r, i] = vec2(0.0, 0.0)
-        tau[r, i] = 0.0
+        f[r, i] = f0[r, i]
+        tau[r, i] = tau0[r, i]

@@ -176,6 +176,10 @@ class FluidConfig(_Config):
                              "dimensionless", 1e-8, gt=0, le=1e-2)
     pressure_sampling: str = _key("choice", "how a surface node reads the pressure",
                                   "bilinear", choices=("bilinear", "cell"))
+    force_update: str = _key("choice", "when the pressure force on the particles is "
+                             "evaluated: at each pressure solve and held in between "
+                             '("solve"), or at every DEM step from the last pressure field '
+                             '("step")', "solve", choices=("solve", "step"))
 
 
 _HOURGLASS, _CONVERGING, _POLYGON = ("hourglass",), ("converging",), ("polygon",)

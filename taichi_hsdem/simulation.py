@@ -26,6 +26,7 @@ import numpy as np
 
 from . import backend
 from . import shapes as shp
+from . import stats
 from .placement import PlacementError, find_free_spot, place
 from .resolve import Model, pair_table, resolve, wall_table
 from .scene import Scene, SceneError
@@ -161,6 +162,8 @@ class Simulation:
         self.f = vec((R, N))
         self.tau = ti.ndarray(real, shape=(R, N))
         self.f_ext = vec((R, N))
+        self.f_fluid = vec((R, N))               # pressure force, held between evaluations
+        self.tau_fluid = ti.ndarray(real, shape=(R, N))
         self.tau_ext = ti.ndarray(real, shape=(R, N))
         self.alive = ti.ndarray(ti.i32, shape=(R, N))
         self.running = arr(np.ones(R, dtype=np.int32), ti.i32)
@@ -168,9 +171,9 @@ class Simulation:
         self.bad = ti.ndarray(ti.i32, shape=R)
         self.max_overlap = ti.ndarray(real, shape=R)
         self.flags = ti.ndarray(ti.i32, shape=neighbors.N_FLAGS)
-        for a in (self.th, self.w, self.tau, self.tau_ext, self.max_overlap):
+        for a in (self.th, self.w, self.tau, self.tau_ext, self.tau_fluid, self.max_overlap):
             a.fill(0)
-        for a in (self.x, self.v, self.f, self.f_ext):
+        for a in (self.x, self.v, self.f, self.f_ext, self.f_fluid):
             a.fill(0)
         for a in (self.alive, self.escaped, self.bad, self.flags):
             a.fill(0)
@@ -191,6 +194,8 @@ class Simulation:
             max(s.shape.bounding_radius for s in sp_list), self.skin, real)
         # Fluid.
         self.fluid = None
+        self._forces_every_step = (self.scene.fluid.enabled
+                                   and self.scene.fluid.force_update == "step")
         self.fluid_solves = 0
         self.fluid_updates = 0
         self.fluid_seconds = 0.0
@@ -282,12 +287,9 @@ class Simulation:
         from .neighbors import F_REBUILD
         m = self.model
         for _ in range(n):
-            if self.fluid is not None:
-                coupling.pressure_forces(self.x, self.th, self.alive, self.running, self.tm,
-                                         self.node_pos, self.node_area, self.node_meta,
-                                         self.pres, self.active, self.fg, self.f, self.tau)
-            else:
-                coupling.clear_forces(self.f, self.tau)
+            if self._forces_every_step:
+                self._fluid_forces()
+            coupling.load_forces(self.f, self.tau, self.f_fluid, self.tau_fluid)
             (hp_old, hs_old), (hp_new, hs_new) = self.hist
             if m.all_disks:
                 contact.disk_contacts(self.x, self.v, self.w, self.f, self.tau, self.alive,
@@ -315,6 +317,12 @@ class Simulation:
                 self._rebuild()
 
     # ------------------------------------------------------------------ fluid
+    def _fluid_forces(self):
+        from . import coupling
+        coupling.pressure_forces(self.x, self.th, self.alive, self.running, self.tm,
+                                 self.node_pos, self.node_area, self.node_meta, self.pres,
+                                 self.active, self.fg, self.f_fluid, self.tau_fluid)
+
     def _update_fluid(self, force=False):
         from . import coupling
         m = self.model
@@ -328,6 +336,7 @@ class Simulation:
             if frac > 0:
                 changed = (kappa != self._kappa_solved).sum(axis=(1, 2)) / m.fluid_active.sum()
                 if changed.max() <= frac:
+                    self._fluid_forces()          # same pressure, bodies have moved
                     return
         t0 = time.perf_counter()
         pres, info = self.fluid.solve(kappa, x0=None)
@@ -337,6 +346,7 @@ class Simulation:
         self.pressure_np = pres
         self.last_fluid_info = info
         self.pres.from_numpy(np.nan_to_num(pres, nan=0.0).astype(self._npr))
+        self._fluid_forces()
         if self.u_ref is None:
             # mean fluid speed through the constriction of the initial, open channel
             self.u_ref = np.abs(info.flux_out) / m.geometry.constriction_width
@@ -462,6 +472,8 @@ class Simulation:
             self.v.from_numpy(vs.astype(self._npr))
             self.alive.from_numpy(alive.astype(np.int32))
             self._rebuild()
+            if self.fluid is not None:
+                self._fluid_forces()              # the re-inserted bodies feel the flow at once
 
     # ------------------------------------------------------------------ run
     def run(self, progress=None, on_frame=None, frame_times=None) -> Result:
@@ -537,6 +549,9 @@ class Simulation:
             "wall_time_s": wall,
             "realizations": real,
             "mean_escapees": float(np.mean([r.escapees for r in ok])) if ok else None,
+            # censoring-aware clogging statistics over the stable realizations
+            "statistics": (stats.summarize([r.escapees for r in ok], [bool(r.clogged) for r in ok])
+                           if ok else None),
             "fluid": None if self.fluid is None else {
                 "updates": self.fluid_updates, "solves": self.fluid_solves,
                 "solve_seconds": self.fluid_seconds,
