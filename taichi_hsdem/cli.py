@@ -111,7 +111,7 @@ def main(argv=None) -> int:
         print(f"{args.scene}: run.arch: {exc}", file=sys.stderr)
         return EXIT_INVALID
     out.mkdir(parents=True, exist_ok=True)
-    write_resolved_scene(sim.scene, out)
+    write_resolved_scene(sim.scene, out, sim.model.notes)
     _say(args.quiet, f"{scene.name}: {sim.R} realization(s) x {sim.N} particles, "
          f"dt = {sim.dt:.3g} s, {sim.model.species[0].shape.name if len(sim.model.species) == 1 else 'mixed'} "
          f"({'disk' if sim.model.all_disks else 'level-set'} contacts), arch {sim.arch} -> {out}")

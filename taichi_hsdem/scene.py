@@ -168,7 +168,9 @@ class FluidConfig(_Config):
     p_out: float = _key("float", "outlet pressure, Pa", 0.0)
     flow_rate: float | None = _key("float", "Q through the whole gap, m^3/s (required "
                                    'for bc = "flow_rate")', gt=0)
-    update_interval: int = _key("int", "DEM steps between pressure solves", 100, ge=1)
+    update_interval: int | str = _key("int", 'DEM steps between pressure solves, or "auto" '
+                                      "(the fastest expected particle crosses half a fluid "
+                                      "cell between solves)", AUTO, auto=True, ge=1)
     resolve_fraction: float = _key("float", "re-solve only if more than this fraction "
                                    "of cells changed permeability (0: always), "
                                    "dimensionless", 0.0, ge=0, lt=1)

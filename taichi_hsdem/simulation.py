@@ -35,6 +35,7 @@ CHECK_INTERVAL = 100          # steps between host-side checks
 LS_HISTORY_SLOTS = 3          # contacts one surface node can remember at once
 DISK_HISTORY_SLOTS = 8        # contacts one disk can remember at once
 SKIN_FRACTION = 0.25          # Verlet skin as a fraction of the smallest d_eq
+UPDATE_CELL_FRACTION = 0.5    # fluid cells a particle may cross between auto-interval solves
 
 
 def _grid_gradient(phi: np.ndarray, h: float) -> np.ndarray:
@@ -350,6 +351,20 @@ class Simulation:
         if self.u_ref is None:
             # mean fluid speed through the constriction of the initial, open channel
             self.u_ref = np.abs(info.flux_out) / m.geometry.constriction_width
+            self._resolve_update_interval()
+
+    def _resolve_update_interval(self):
+        """``fluid.update_interval = "auto"``: the fastest expected particle (the mean
+        fluid speed through the constriction) crosses half a fluid cell between solves."""
+        if self.scene.fluid.update_interval != "auto":
+            return
+        u = float(np.max(self.u_ref))
+        n = max(1, int(UPDATE_CELL_FRACTION * self.model.fluid_dx / (u * self.dt))) if u > 0 else 1
+        self.scene = self.scene.with_values({"fluid.update_interval": n})
+        self.model.scene = self.scene
+        self.model.notes["fluid.update_interval"] = (
+            f"{UPDATE_CELL_FRACTION:g} cell / (u_c {u:.4g} * dt): a particle at the mean "
+            f"constriction speed crosses {UPDATE_CELL_FRACTION:g} cell between solves")
 
     # ------------------------------------------------------------------ checks
     def _check(self):
