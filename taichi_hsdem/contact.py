@@ -37,6 +37,8 @@ from .backend import ti  # sets the environment before Taichi loads
 
 vec2 = ti.math.vec2
 
+# Realization status bit set here (integrate.py sets 1 and 2).
+BAD_PASSED = 4
 # Per-pair material table, last axis: kn, ks, mu, c_e (restitution factor).
 PAIR_KN, PAIR_KS, PAIR_MU, PAIR_CE = 0, 1, 2, 3
 # Scalar parameters passed in one small array so that changing them never recompiles.
@@ -163,8 +165,13 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                 wall: ti.types.ndarray(), wall_grad: ti.types.ndarray(), wall_meta: ti.types.ndarray(), hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
                 hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(),
                 prm: ti.types.ndarray(), max_overlap: ti.types.ndarray(), flags: ti.types.ndarray(),
-                slots: ti.template()):
-    """Add every contact force and moment acting on each body (level-set path)."""
+                bad: ti.types.ndarray(), slots: ti.template()):
+    """Add every contact force and moment acting on each body (level-set path).
+
+    A body whose centre lies inside a neighbour has passed through it between
+    surface nodes (too few nodes for the speed or the shapes): the realization is
+    flagged ``BAD_PASSED`` rather than allowed to go on with bodies inside bodies.
+    """
     n_part = x.shape[1]
     dt = prm[P_DT]
     normalize = prm[P_NORMALIZE] > 0.5
@@ -201,6 +208,11 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             mu = pair[a, b, PAIR_MU]
             meff = mass[i] * mass[j] / (mass[i] + mass[j])
             gamma = pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
+            centre, _ = grid_sample(ls_phi, ls_grad, ls_meta[tj, 0], ls_meta[tj, 1], ls_meta[tj, 2],
+                                    ls_geo[tj, 0], ls_geo[tj, 1], ls_geo[tj, 2],
+                                    rot_t(cj, sj, xi - xj))
+            if centre < 0.0:
+                ti.atomic_or(bad[r], BAD_PASSED)
             # (a) nodes of i inside j: force on i, history owned by i.
             fa = vec2(0.0, 0.0)
             ma = 0.0

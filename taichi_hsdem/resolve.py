@@ -130,6 +130,17 @@ def _driving_pressure(scene: Scene, geom: wl.Geometry, species: list[Species]) -
             "Q/H seeping through one particle layer across the constriction (clogged)")
 
 
+def node_sagitta(shape: shp.Shape) -> float:
+    """Deepest point of the outline between two consecutive surface nodes, below
+    their chord: how far another body can sink into this one unseen by its nodes."""
+    nodes = shape.nodes
+    nxt = np.roll(nodes, -1, axis=0)
+    ts = np.linspace(0.0, 1.0, 9)[1:-1]
+    pts = nodes[:, None, :] * (1 - ts[None, :, None]) + nxt[:, None, :] * ts[None, :, None]
+    # points on the chord inside the body lie below the surface by -phi
+    return float(max(0.0, -shp.signed_distance(shape, pts.reshape(-1, 2)).min()))
+
+
 def critical_time_step(species: list[Species], all_disks: bool, normalize: bool) -> float:
     """``2 / omega_max`` over every species pair and every species against a wall.
 
@@ -248,6 +259,16 @@ def resolve(scene: Scene) -> Model:
             values[f"particles.{k}.packing_fraction"] = None
             notes[f"particles.{k}.count"] = (f"packing fraction {sp.packing_fraction:g} of the control "
                                              f"volume x in [{region[0]:g}, {region[1]:g}]")
+        hidden = node_sagitta(t)
+        if hidden > scene.contact.overlap_target * t.equivalent_diameter:
+            need = sp.nodes
+            while need < 100000 and node_sagitta(_shape(sp.replace(nodes=need))) > \
+                    scene.contact.overlap_target * t.equivalent_diameter:
+                need *= 2
+            bad(f"{key}.nodes", f"{sp.nodes} surface nodes leave up to {hidden:.3g} "
+                f"({hidden / t.equivalent_diameter:.3g} d) of the surface between two nodes, "
+                f"where another body can sink unseen: more than contact.overlap_target "
+                f"({scene.contact.overlap_target:g} d); use about {need} nodes or more")
         mass = sp.density * t.area * (f.gap if f.gap else 1.0)
         inertia = mass * t.inertia_per_mass
         ls = t.equivalent_diameter / 40.0 if sp.ls_spacing == "auto" else sp.ls_spacing

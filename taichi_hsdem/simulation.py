@@ -27,6 +27,8 @@ import numpy as np
 from . import backend
 from . import shapes as shp
 from . import stats
+from .contact import BAD_PASSED
+from .integrate import BAD_FAST, BAD_NAN
 from .placement import PlacementError, find_free_spot, place
 from .resolve import Model, pair_table, resolve, wall_table
 from .scene import Scene, SceneError
@@ -36,6 +38,7 @@ LS_HISTORY_SLOTS = 3          # contacts one surface node can remember at once
 DISK_HISTORY_SLOTS = 8        # contacts one disk can remember at once
 SKIN_FRACTION = 0.25          # Verlet skin as a fraction of the smallest d_eq
 UPDATE_CELL_FRACTION = 0.5    # fluid cells a particle may cross between auto-interval solves
+MAX_TRAVEL_BETWEEN_SOLVES = 0.5  # diameters a particle may move between solves, at most
 
 
 def _grid_gradient(phi: np.ndarray, h: float) -> np.ndarray:
@@ -306,7 +309,7 @@ class Simulation:
                                     self.node_pos, self.node_meta, self.wall, self.wall_grad,
                                     self.wall_meta, hp_old, hs_old,
                                     hp_new, hs_new, self.prm, self.max_overlap, self.flags,
-                                    self.slots)
+                                    self.bad, self.slots)
             self.hist.reverse()
             integrate.advance(self.x, self.th, self.v, self.w, self.f, self.tau, self.f_ext,
                               self.tau_ext, self.alive,
@@ -356,9 +359,19 @@ class Simulation:
     def _resolve_update_interval(self):
         """``fluid.update_interval = "auto"``: the fastest expected particle (the mean
         fluid speed through the constriction) crosses half a fluid cell between solves."""
-        if self.scene.fluid.update_interval != "auto":
-            return
         u = float(np.max(self.u_ref))
+        given = self.scene.fluid.update_interval
+        if given != "auto":
+            travel = given * self.dt * u
+            if travel > MAX_TRAVEL_BETWEEN_SOLVES * self.model.d_min:
+                most = int(MAX_TRAVEL_BETWEEN_SOLVES * self.model.d_min / (u * self.dt))
+                raise SceneError([
+                    f"{self.scene.source}: fluid.update_interval: {given} steps let a particle "
+                    f"at the constriction's mean fluid speed ({u:.3g}) move "
+                    f"{travel / self.model.d_min:.2g} diameters between pressure solves, "
+                    f"overrunning the pressure that pushes it; use at most {most} "
+                    f"(or \"auto\")"])
+            return
         n = max(1, int(UPDATE_CELL_FRACTION * self.model.fluid_dx / (u * self.dt))) if u > 0 else 1
         self.scene = self.scene.with_values({"fluid.update_interval": n})
         self.model.scene = self.scene
@@ -388,10 +401,13 @@ class Simulation:
                 continue
             res = self.results[r]
             reason = None
-            if bad[r] & 1:
+            if bad[r] & BAD_NAN:
                 reason = "non-finite position or velocity"
-            elif bad[r] & 2:
+            elif bad[r] & BAD_FAST:
                 reason = "a particle moved more than a quarter of its size in one step"
+            elif bad[r] & BAD_PASSED:
+                reason = ("a particle's centre ended up inside another: it passed through "
+                          "between surface nodes; raise the particles' nodes or lower run.dt")
             elif overlap[r] > sc.contact.overlap_limit:
                 reason = (f"overlap reached {overlap[r]:.3g} of a particle diameter "
                           f"(limit contact.overlap_limit = {sc.contact.overlap_limit:g})")
