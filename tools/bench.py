@@ -1,0 +1,140 @@
+"""Benchmark the shipped cases: one JSON line per case on stdout.
+
+    python tools/bench.py                 # CPU, every case (minutes)
+    python tools/bench.py --quick         # R = 1, 10 only, shorter runs
+    python tools/bench.py --arch gpu      # on a GPU machine
+    python tools/bench.py --cases disks-0.26-R10,paper-disks-0.26-R1
+
+Cases: disks and squares at packing fractions 0.17 and 0.26 in the vani channel
+(scenes/vani_phi026.toml; squares from scenes/squares.toml with the same count),
+realizations 1, 10, 100; and a paper-like case (the paper's time step 3.75e-7 s and
+a pressure solve every 1e4 steps) to compare with the auto settings in one run.
+
+Each case runs in its own process (so peak memory is the case's own), first a few
+steps to compile, then ``--sim-time`` seconds of simulated time timed as a whole.
+Reported per case: DEM steps per second, surface-node (or disk-pair) contact
+evaluations per second over whole steps, simulated realization-seconds per wall
+second, realization pressure solves per second and the solve's share of wall
+time, peak resident memory.
+"""
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER_DT = 3.75e-7
+PAPER_FLUID_EVERY = 10000
+
+
+def cases(quick):
+    reals = (1, 10) if quick else (1, 10, 100)
+    out = []
+    for shape in ("disks", "squares"):
+        for phi in (0.17, 0.26):
+            for r in reals:
+                out.append(f"{shape}-{phi}-R{r}")
+    out += ["paper-disks-0.26-R1", "paper-squares-0.26-R1"]
+    return out
+
+
+def overrides(case, sim_time):
+    parts = case.split("-")
+    paper = parts[0] == "paper"
+    if paper:
+        parts = parts[1:]
+    shape, phi, reals = parts[0], float(parts[1]), int(parts[2][1:])
+    scene = ROOT / "scenes" / ("vani_phi026.toml" if shape == "disks" else "squares.toml")
+    ov = [f"run.realizations={reals}", f"run.t_end={sim_time}", "run.stop_at_clog=false"]
+    if shape == "disks":
+        ov.append(f"particles.packing_fraction={phi}")
+    else:
+        # squares of bounding diameter d_b: the count that gives phi in the control volume
+        side = 98.99e-6
+        area = 1.4e-3 * 2.8e-3
+        ov.append(f"particles.count={int(round(phi * area / side ** 2))}")
+    if paper:
+        ov += [f"run.dt={PAPER_DT}", f"fluid.update_interval={PAPER_FLUID_EVERY}"]
+    return scene, ov
+
+
+def run_case(case, arch, precision, sim_time):
+    import numpy as np
+    from taichi_hsdem import Simulation, backend, load_scene
+    backend.init(arch, precision)
+    scene_path, ov = overrides(case, sim_time)
+    ov += [f'run.arch="{arch}"', f'run.precision="{precision}"']
+    sim = Simulation(load_scene(scene_path, ov))
+    sim.step(5)                      # compile every kernel before timing
+    solves0, fluid_s0, steps0 = sim.fluid_solves, sim.fluid_seconds, sim.steps
+    t0 = time.perf_counter()
+    sim.run()
+    wall = time.perf_counter() - t0
+    steps = sim.steps - steps0
+    # contact evaluations per step, from the final neighbour lists
+    nbr = sim.nlist.nbr_n.to_numpy().astype(np.int64)
+    alive = sim.alive.to_numpy().astype(bool)
+    nodes = np.array([s.shape.nodes.shape[0] for s in sim.model.species])[sim.sp_np]
+    if sim.model.all_disks:
+        evals = int(nbr[alive].sum() + alive.sum())
+    else:
+        nb = sim.nlist.nbr.to_numpy()
+        evals = 0
+        for r in range(sim.R):
+            for i in np.flatnonzero(alive[r]):
+                js = nb[r, i, :nbr[r, i]]
+                evals += int(nbr[r, i] * nodes[i] + nodes[js].sum() + nodes[i])
+    solves = (sim.fluid_solves - solves0) * sim.R
+    return {
+        "case": case, "arch": sim.arch, "precision": precision,
+        "realizations": sim.R, "particles": sim.N, "dt": sim.dt,
+        "fluid_update_interval": sim.scene.fluid.update_interval,
+        "steps": steps, "wall_s": round(wall, 3),
+        "steps_per_s": round(steps / wall, 1),
+        "contact_evals_per_s": round(evals * steps / wall, 0),
+        "realization_sim_s_per_wall_s": round(sim.R * (sim.t - 0.0) / wall, 6),
+        "pressure_solves_per_s": round(solves / wall, 2),
+        "pressure_share": round((sim.fluid_seconds - fluid_s0) / wall, 3),
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+    }
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
+    p.add_argument("--precision", default="f64", choices=("f64", "f32"))
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--cases", help="comma-separated case names (default: all)")
+    p.add_argument("--sim-time", type=float, default=None,
+                   help="simulated seconds per case (default 0.05, --quick 0.02)")
+    p.add_argument("--one", help=argparse.SUPPRESS)   # internal: run one case here
+    a = p.parse_args(argv)
+    sim_time = a.sim_time or (0.02 if a.quick else 0.05)
+    if a.one:
+        print(json.dumps(run_case(a.one, a.arch, a.precision, sim_time)), flush=True)
+        return 0
+    chosen = a.cases.split(",") if a.cases else cases(a.quick)
+    for case in chosen:
+        proc = subprocess.run([sys.executable, __file__, "--one", case, "--arch", a.arch,
+                               "--precision", a.precision, "--sim-time", str(sim_time)],
+                              capture_output=True, text=True)
+        if proc.returncode != 0:
+            print(json.dumps({"case": case, "error": proc.stderr.strip().splitlines()[-1:]}),
+                  flush=True)
+            continue
+        line = proc.stdout.strip().splitlines()[-1]
+        print(line, flush=True)
+        d = json.loads(line)
+        print(f"{case:24s} {d['steps_per_s']:>9.0f} steps/s {d['contact_evals_per_s']:>12.3g} "
+              f"evals/s {d['realization_sim_s_per_wall_s']:>9.4f} real-s/s "
+              f"pressure {100 * d['pressure_share']:.0f} % {d['peak_rss_mb']:.0f} MB",
+              file=sys.stderr, flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
