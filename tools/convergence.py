@@ -1,0 +1,163 @@
+"""Accuracy against cost: convergence studies with a CSV and a Pareto chart each.
+
+    python tools/convergence.py pressure [--quick] [--out DIR]
+    python tools/convergence.py contact  [--quick] [--out DIR]
+
+``pressure``: the hourglass scene's pressure field (particles as placed) at
+3 ... 12 fluid cells per smallest diameter against a 16-cell reference, sampled at
+the same points; error against the wall time of one solve (set-up + solve).
+(The exact-solution study is ``tools/inclusion_convergence.py``.)
+
+``contact``: the force of a level-set disk pressed into another by a fixed
+overlap, against the analytic disk's ``kn * delta``, as the surface-node count and
+the level-set spacing vary, with and without the paper's node normalisation;
+error against the time of one contact step.
+
+Outputs go to ``--out`` (default ``runs/convergence/``): ``<study>.csv`` and
+``<study>.png``.
+"""
+import argparse
+import csv
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+
+def _write(out, name, header, rows):
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / f"{name}.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+    return out / f"{name}.csv"
+
+
+def _pareto(out, name, series, xlabel, ylabel, title):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for label, xs, ys, tags in series:
+        ax.loglog(xs, ys, "o-", label=label)
+        for x, y, t in zip(xs, ys, tags):
+            ax.annotate(str(t), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / f"{name}.png", dpi=120)
+    plt.close(fig)
+    return out / f"{name}.png"
+
+
+def pressure_study(out, quick):
+    from scipy.interpolate import RegularGridInterpolator
+    from taichi_hsdem import Simulation, load_scene
+    scene_path = ROOT / "scenes" / "hourglass24.toml"
+    levels = (3, 4, 6, 8) if quick else (3, 4, 6, 8, 12)
+    ref_level = 12 if quick else 16
+    fields = {}
+    for cpd in levels + (ref_level,):
+        scene = load_scene(scene_path, [f"fluid.cell_size={1.0 / cpd}"])
+        sim = Simulation(scene)
+        t0 = time.perf_counter()
+        sim._update_fluid(force=True)          # rebuild + solve, timed alone
+        wall = time.perf_counter() - t0
+        g = sim.model.geometry
+        nx, ny = sim.model.fluid_shape
+        dx = sim.model.fluid_dx
+        xc = g.x_min + (np.arange(nx) + 0.5) * dx
+        yc = g.y_min + (np.arange(ny) + 0.5) * dx
+        fields[cpd] = (xc, yc, sim.pressure_np[0], wall, nx * ny)
+    # compare on the coarsest grid's active cell centres, away from walls by a cell
+    xr, yr, pr, _, _ = fields[ref_level]
+    ref = RegularGridInterpolator((xr, yr), np.nan_to_num(pr, nan=np.nan), bounds_error=False)
+    xc, yc, p3, _, _ = fields[levels[0]]
+    pts = np.stack(np.meshgrid(xc, yc, indexing="ij"), -1).reshape(-1, 2)
+    drop = 100.0                                # p_in - p_out of the scene
+    rows = []
+    for cpd in levels:
+        x, y, p, wall, cells = fields[cpd]
+        mine = RegularGridInterpolator((x, y), p, bounds_error=False)(pts)
+        truth = ref(pts)
+        ok = np.isfinite(mine) & np.isfinite(truth)
+        err = np.abs(mine[ok] - truth[ok]) / drop
+        rows.append([cpd, cells, float(np.mean(err)), float(np.max(err)), wall])
+    csv_path = _write(out, "pressure", ["cells_per_diameter", "cells", "mean_abs_error_over_dp",
+                                       "max_abs_error_over_dp", "solve_wall_s"], rows)
+    png = _pareto(out, "pressure", [("mean |p - p_ref| / dp", [r[4] for r in rows],
+                                     [r[2] for r in rows], [r[0] for r in rows])],
+                  "wall time of one solve (s)", "error", f"hourglass24 pressure vs {ref_level} cells/d "
+                  "(labels: cells per diameter)")
+    return rows, csv_path, png
+
+
+def contact_study(out, quick):
+    from conftest import arena_scene, make_sim
+    from taichi_hsdem import backend
+    backend.init("cpu", "f64")
+    kn, depth = 1.0e4, 0.02
+    nodes_list = (10, 20, 40, 80) if quick else (10, 20, 40, 80, 160, 320)
+    spacings = (1 / 10, 1 / 20, 1 / 40) if quick else (1 / 10, 1 / 20, 1 / 40, 1 / 80)
+    rows = []
+    rng = np.random.default_rng(0)
+    angles = rng.uniform(0, 2 * np.pi, 8)      # contact directions relative to the nodes
+    for normalize in (True, False):
+        for nodes in nodes_list:
+            for h in spacings:
+                ratios = []
+                sim = make_sim(arena_scene([{"shape": "circle", "diameter": 1.0, "count": 2,
+                                             "nodes": nodes, "ls_spacing": h}], kn=kn,
+                                           fast_path=False, normalize=normalize,
+                                           # let sparse node sets through: they are studied here
+                                           contact__overlap_target=0.2))
+                for a in angles:
+                    c = np.array([10.0, 5.0])
+                    u = np.array([np.cos(a), np.sin(a)])
+                    sim.set_state([[c, c + (1.0 - depth) * u]])
+                    sim.step(1)
+                    f, _ = sim.forces()
+                    ratios.append(-f[0, 0] @ u / (kn * depth))
+                t0 = time.perf_counter()
+                sim.step(200)
+                per_step = (time.perf_counter() - t0) / 200
+                ratios = np.array(ratios)
+                rows.append([normalize, nodes, h, float(np.mean(ratios)), float(np.std(ratios)),
+                             float(np.mean(np.abs(ratios - 1.0))), per_step])
+    csv_path = _write(out, "contact", ["normalize_by_nodes", "nodes", "ls_spacing_over_d",
+                                      "force_ratio_mean", "force_ratio_std",
+                                      "mean_abs_error", "step_wall_s"], rows)
+    series = []
+    for normalize in (True, False):
+        sel = [r for r in rows if r[0] == normalize and r[2] == spacings[-1]]
+        series.append((f"normalize={normalize} (h = d/{round(1 / spacings[-1])})",
+                       [r[6] for r in sel], [max(r[5], 1e-6) for r in sel], [r[1] for r in sel]))
+    png = _pareto(out, "contact", series, "wall time of one step, 2 disks (s)",
+                  "mean |F_ls / (kn delta) - 1|",
+                  f"level-set disk vs analytic at overlap {depth} d (labels: nodes)")
+    return rows, csv_path, png
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("study", choices=("pressure", "contact"))
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--out", default=str(ROOT / "runs" / "convergence"))
+    a = p.parse_args(argv)
+    study = {"pressure": pressure_study, "contact": contact_study}[a.study]
+    rows, csv_path, png = study(Path(a.out), a.quick)
+    for r in rows:
+        print(", ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in r))
+    print(f"wrote {csv_path} and {png}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
