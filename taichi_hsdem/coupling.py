@@ -15,7 +15,7 @@
 import numpy as np
 from .backend import ti  # sets the environment before Taichi loads
 
-from .contact import grid_sample, rot, rot_t, cross
+from .contact import cross, grid_sample, rot, rot_t, spin
 
 vec2 = ti.math.vec2
 
@@ -53,7 +53,10 @@ def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
                            trad: ti.types.ndarray(), ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(),
                            ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
                            base: ti.types.ndarray(), kappa: ti.types.ndarray(),
-                           fg: ti.types.ndarray()):
+                           fg: ti.types.ndarray(), vs: ti.types.ndarray(),
+                           ws: ti.types.ndarray(), carried: ti.types.ndarray()):
+    """Permeability of every fluid cell, and ``chi v``: the velocity of the particle
+    a cell's centre lies in (``vs + ws x r``), zero outside particles."""
     nx = base.shape[0]
     ny = base.shape[1]
     ox = fg[FG_OX]
@@ -61,6 +64,7 @@ def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
     h = fg[FG_DX]
     for r, cx, cy in kappa:
         kappa[r, cx, cy] = base[cx, cy]
+        carried[r, cx, cy] = vec2(0.0, 0.0)
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
         if alive[r, i] == 0:
             continue
@@ -78,6 +82,7 @@ def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
                     if inside_body(tm[i], is_circle, trad, ls_phi, ls_grad, ls_meta, ls_geo,
                                    rot_t(c, s, centre - xi)):
                         ti.atomic_min(kappa[r, a, b], kp[sp[i]])
+                        carried[r, a, b] = vs[r, i] + spin(ws[r, i], centre - xi)
 
 
 @ti.func

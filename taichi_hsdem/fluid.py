@@ -373,6 +373,7 @@ class PressureSolver:
         fa = np.concatenate([flat[:-1, :][fx], flat[:, :-1][fy]])
         fb = np.concatenate([flat[1:, :][fx], flat[:, 1:][fy]])
         fg = np.concatenate([np.full(fx.sum(), dy / dx), np.full(fy.sum(), dx / dy)])
+        f_is_x = np.concatenate([np.ones(fx.sum(), bool), np.zeros(fy.sum(), bool)])
 
         # Drop the active cells no Dirichlet face can reach: their pressure is
         # undetermined (a singular block) and no flow passes through them.
@@ -403,6 +404,7 @@ class PressureSolver:
         number[self._cells] = np.arange(n)
         keep = connected[fa]  # both ends share a component
         self._fa, self._fb, self._fg = number[fa[keep]], number[fb[keep]], fg[keep]
+        self._f_is_x = f_is_x[keep]
         self._dc = number[d_cells]
         self._dg = np.concatenate(face_factor)
         self._dv = np.concatenate(face_value) - self.p_ref
@@ -509,8 +511,19 @@ class PressureSolver:
         return ~anchored[labels], blocked
 
     # ------------------------------------------------------------------ public
-    def solve(self, kappa, x0=None):
+    def solve(self, kappa, x0=None, carried=None, occupied=None):
         """Pressure for each realization's permeability field.
+
+        With ``carried`` (the volume flux that moving particles carry, ``chi v``,
+        m/s, shape ``kappa.shape + (2,)``), the mixture is conserved rather than
+        the fluid alone: ``div((kappa/eta) grad p) = div(chi v)``, so a particle
+        moving with the flow displaces no fluid around itself. ``occupied`` (bool,
+        ``kappa``'s shape) marks the cells inside particles: a face with a particle
+        cell on either side moves with it, carrying the mean of ``chi v`` over its
+        occupied sides (half the particle's velocity on a particle's edge would
+        push the other half through the particle's low permeability); faces on the
+        boundary carry nothing, so the carried fluxes sum to zero over the domain
+        and inflow still equals outflow.
 
         Parameters
         ----------
@@ -576,19 +589,23 @@ class PressureSolver:
             guess = np.nan_to_num(guess, nan=0.0)
         guess[self._pinned] = 0.0
 
+        rhs = self._rhs
+        if carried is not None:
+            rhs = rhs + self._carried_source(carried, occupied)
+            rhs[self._pinned] = 0.0
         x = np.zeros((R, n))
         iterations, residual = 0, 0.0
-        bnorm = np.linalg.norm(self._rhs, axis=1)
+        bnorm = np.linalg.norm(rhs, axis=1)
         for r in range(R):
             if bnorm[r] == 0.0:  # no driving at all: the SPD system's answer is 0
                 continue
             history = []
-            x[r] = self._hierarchy[r].solve(self._rhs[r], x0=guess[r], tol=self.tol,
+            x[r] = self._hierarchy[r].solve(rhs[r], x0=guess[r], tol=self.tol,
                                             maxiter=MAXITER, accel="cg",
                                             residuals=history)
             iterations = max(iterations, len(history) - 1)
             A = self._hierarchy[r].levels[0].A
-            residual = max(residual, np.linalg.norm(self._rhs[r] - A @ x[r]) / bnorm[r])
+            residual = max(residual, np.linalg.norm(rhs[r] - A @ x[r]) / bnorm[r])
         self._last = x
 
         flux_in, flux_out = self._boundary_fluxes(x, k)
@@ -607,6 +624,24 @@ class PressureSolver:
                          residual=float(residual), rebuilt=bool(changed.size),
                          blocked=self._blocked.copy())
         return (pressure[0] if single else pressure), info
+
+    def _carried_source(self, carried, occupied):
+        """Right-hand side of the particles' carried flux: each interior face takes
+        the mean of ``chi v`` over its occupied sides, normal to it, times its length."""
+        R = self.n_batch
+        v = np.asarray(carried, dtype=float).reshape(R, -1, 2)[:, self._cells]
+        if occupied is None:
+            occupied = np.any(np.asarray(carried).reshape(R, -1, 2) != 0.0, axis=-1)
+        chi = np.asarray(occupied, dtype=float).reshape(R, -1)[:, self._cells]
+        comp = np.where(self._f_is_x, 0, 1)
+        length = np.where(self._f_is_x, self.dy, self.dx)
+        sides = np.maximum(chi[:, self._fa] + chi[:, self._fb], 1.0)
+        q = (v[:, self._fa, comp] + v[:, self._fb, comp]) / sides * length   # a -> b
+        n = self._n
+        offset = (np.arange(R) * n)[:, None]
+        src = (np.bincount((offset + self._fb).ravel(), q.ravel(), R * n)
+               - np.bincount((offset + self._fa).ravel(), q.ravel(), R * n))
+        return src.reshape(R, n)
 
     def _boundary_fluxes(self, x, kappa):
         """Sums of the inward and outward boundary-face fluxes per realization."""

@@ -38,9 +38,11 @@ def _clean(obj):
     return obj
 
 
-def write_resolved_scene(scene: Scene, out: Path):
+def write_resolved_scene(scene: Scene, out: Path, notes: dict | None = None):
+    """``scene.resolved.toml``, headed by what each ``auto`` chose and why."""
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(out / "scene.resolved.toml", scene_to_toml(scene))
+    head = "".join(f"# auto {key}: {why}\n" for key, why in sorted((notes or {}).items()))
+    _atomic_write(out / "scene.resolved.toml", head + scene_to_toml(scene))
 
 
 def write_summary(summary: dict, out: Path):
@@ -59,47 +61,157 @@ def write_series(series, statuses, out: Path):
 
 
 class VideoRecorder:
-    """Draws one realization of a running :class:`Simulation` into an MP4."""
+    """Draws one realization of a running :class:`Simulation` into ``video.mp4``.
+
+    Pass it as ``on_frame`` to :meth:`Simulation.run` with ``frame_times`` from
+    :attr:`frame_times`: ``output.frames`` frames evenly spaced over
+    ``[0, run.t_end]``, frame 0 being the initial state (drawn before the first
+    step), played at ``output.fps``. The realization shown is
+    ``output.video_realization``.
+
+    The pressure colour map keeps one range for the whole video, that of the
+    pressure field at construction time, i.e. the initial solve (the open
+    channel with the particles as placed): colours compare across frames, values
+    beyond it (e.g. the inlet pressure rising behind a clog under a flow-rate
+    boundary condition) are clipped. The strip under each frame prints the range
+    next to the colour bar; :meth:`summary` reports it.
+
+    The file is written as ``<name>.part.mp4`` and renamed by
+    ``close(keep=True)``. A frame that fails to render stops the video (the run
+    goes on); :attr:`error` then says why and ``close`` keeps nothing.
+    """
 
     def __init__(self, sim, path: Path):
+        import time
         from .render import Renderer, VideoWriter
+        t0 = time.perf_counter()
         sc = sim.scene
         m = sim.model
         g = m.geometry
         self.sim = sim
         self.r = sc.output.video_realization
-        prange = None
-        pshape = None
+        self.fps = sc.output.fps
+        self.n_frames = sc.output.frames
+        prange = pshape = extent = None
         if sim.fluid is not None:
-            pshape = m.fluid_shape
-            p = sim.pressure_np[self.r]
-            lo, hi = float(np.nanmin(p)), float(np.nanmax(p))
-            prange = (lo, hi if hi > lo else lo + 1.0)
-        self.renderer = Renderer((g.x_min, g.x_max, g.y_min, g.y_max), g.outline, list(g.obstacles),
-                                 [s.shape for s in m.species], width=sc.output.width,
-                                 pressure_shape=pshape, pressure_range=prange, title=sc.name)
-        self.tmp = path.with_name(path.name + ".part.mp4")
-        self.path = path
-        self.writer = VideoWriter(self.tmp, sc.output.fps)
+            nx, ny = m.fluid_shape
+            dx = m.fluid_dx
+            pshape = (nx, ny)
+            # Square cells of side dx from the domain's lower-left corner; the
+            # top row may overhang y_max.
+            extent = (g.x_min, g.x_min + nx * dx, g.y_min, g.y_min + ny * dx)
+            prange = self._range_of(sim.pressure_np[self.r])
+        self.renderer = Renderer((g.x_min, g.x_max, g.y_min, g.y_max), g.outline,
+                                 list(g.obstacles), [s.shape for s in m.species],
+                                 width=sc.output.width, pressure_shape=pshape,
+                                 pressure_range=prange, title=sc.name,
+                                 pressure_extent=extent)
+        self.path = Path(path)
+        self.tmp = self.path.with_name(self.path.name + ".part.mp4")
+        self.writer = VideoWriter(self.tmp, self.fps)
         self.frames = 0
-        self.seconds = 0.0
+        self.seconds = 0.0          # drawing and encoding frames, inside the run
+        self.finish_seconds = 0.0   # flushing the encoder at close
+        self.setup_seconds = time.perf_counter() - t0
+        self.error = None
+        self._fill_for = self._fill_index = None
+
+    @staticmethod
+    def _range_of(p):
+        """Finite (min, max) of a pressure field, widened when flat; None when
+        nothing is finite (no solve yet)."""
+        p = np.asarray(p, dtype=float)
+        finite = p[np.isfinite(p)]
+        if finite.size == 0:
+            return None
+        lo, hi = float(finite.min()), float(finite.max())
+        if hi <= lo:
+            hi = lo + max(1.0, abs(lo))
+        return lo, hi
+
+    def _display_pressure(self, p):
+        """The field with every non-finite cell (solid wall) given its nearest
+        finite cell's value. The renderer colours a fluid pixel by the cell
+        holding its centre; along a slanted wall that cell's centre can lie in
+        the wall (an inactive, NaN cell), which would show as a pale fleck."""
+        p = np.asarray(p, dtype=float)
+        bad = ~np.isfinite(p)
+        if not bad.any() or bad.all():
+            return p
+        if self._fill_for is None or not np.array_equal(bad, self._fill_for):
+            from scipy import ndimage
+            self._fill_for = bad
+            self._fill_index = ndimage.distance_transform_edt(
+                bad, return_distances=False, return_indices=True)
+        return p[tuple(self._fill_index)]
+
+    @property
+    def pressure_range(self):
+        """The fixed colour-map range, (p_min, p_max), or None without fluid."""
+        return self.renderer.pressure_range
+
+    @property
+    def frame_times(self) -> list[float]:
+        """Times of the frames: ``output.frames`` from 0 to ``run.t_end``."""
+        return [float(t) for t in np.linspace(0.0, self.sim.scene.run.t_end, self.n_frames)]
 
     def __call__(self, sim):
         import time
+        if self.error is not None:
+            return
         t0 = time.perf_counter()
-        st = sim.state()
         r = self.r
-        pres = sim.pressure_np[r] if sim.fluid is not None else None
-        esc = sim.results[r].escapees or 0
-        frame = self.renderer.draw(st["x"][r], st["theta"][r], st["species"], st["alive"][r],
-                                   pressure=pres, t=sim.t, escapees=esc)
-        self.writer.write(frame)
+        try:
+            pres = None
+            if sim.fluid is not None:
+                pres = self._display_pressure(sim.pressure_np[r])
+                if self.renderer.pressure_range is None:
+                    # built before any solve: fix the range at the first frame's
+                    self.renderer.pressure_range = self._range_of(pres)
+            x = sim.x.to_numpy()[r].astype(float)
+            theta = sim.th.to_numpy()[r].astype(float)
+            alive = sim.alive.to_numpy()[r].astype(bool)
+            # the live counter: the results' count is only refreshed every check
+            esc = int(sim.escaped.to_numpy()[r])
+            frame = self.renderer.draw(x, theta, sim.sp_np, alive, pressure=pres, t=sim.t,
+                                       escapees=esc)
+            self.writer.write(frame)
+        except Exception as exc:        # a broken video must not lose the run
+            self.error = f"{type(exc).__name__}: {exc}"
+            return
+        finally:
+            self.seconds += time.perf_counter() - t0
         self.frames += 1
-        self.seconds += time.perf_counter() - t0
+
+    def summary(self, wall_time_s: float) -> dict:
+        """``summary.json``'s ``"video"`` entry; ``wall_time_s`` is the run's
+        (which includes the frames' drawing and encoding)."""
+        share = self.seconds / wall_time_s if wall_time_s > 0 else None
+        return {"file": None if self.error else self.path.name,
+                "frames": self.frames, "fps": self.fps, "realization": self.r,
+                "width": self.renderer.width, "height": self.renderer.height,
+                "pressure_range": (None if self.pressure_range is None
+                                   else list(self.pressure_range)),
+                "render_seconds": self.seconds,
+                "render_frames_per_second": (self.frames / self.seconds
+                                             if self.seconds > 0 else None),
+                "render_share_of_wall_time": share,
+                "setup_seconds": self.setup_seconds,
+                "finish_seconds": self.finish_seconds,
+                "error": self.error}
 
     def close(self, keep=True):
-        self.writer.close()
-        if keep:
+        """Finish the file and rename it to ``path`` (``keep``), or delete it."""
+        import time
+        t0 = time.perf_counter()
+        try:
+            self.writer.close()
+        except Exception as exc:
+            if self.error is None:
+                self.error = f"{type(exc).__name__}: {exc}"
+        self.finish_seconds += time.perf_counter() - t0
+        self.renderer.close()
+        if keep and self.error is None and self.tmp.exists():
             os.replace(self.tmp, self.path)
         elif self.tmp.exists():
             self.tmp.unlink()

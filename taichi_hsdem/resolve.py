@@ -281,11 +281,15 @@ def resolve(scene: Scene) -> Model:
         if sp.xi is not None:
             xi = float(sp.xi)
         elif scene.damping.xi == "auto":
-            if f.enabled:
+            if f.enabled and f.particle_flux:
+                xi = f.viscosity / (sp.density * (kappa_free + kp))
+                notes["damping.xi"] = ("eta / (rho (H^2/12 + kappa_p)): an isolated particle "
+                                       "carried by the flow drifts at the mean fluid velocity")
+            elif f.enabled:
                 beta = (kappa_free - kp) / (kappa_free + kp)
                 xi = (1.0 + beta) * f.viscosity / (sp.density * kappa_free)
-                notes["damping.xi"] = ("(1 + beta) eta / (rho H^2/12): an isolated particle drifts "
-                                       "at the mean fluid velocity")
+                notes["damping.xi"] = ("(1 + beta) eta / (rho H^2/12): an isolated particle held "
+                                       "in the pressure solve drifts at the mean fluid velocity")
             else:
                 xi = 0.0
                 notes["damping.xi"] = "no fluid: no plate drag"

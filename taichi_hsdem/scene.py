@@ -178,6 +178,9 @@ class FluidConfig(_Config):
                              "dimensionless", 1e-8, gt=0, le=1e-2)
     pressure_sampling: str = _key("choice", "how a surface node reads the pressure",
                                   "bilinear", choices=("bilinear", "cell"))
+    particle_flux: bool = _key("bool", "conserve the mixture: moving particles carry "
+                               "their volume (div((kappa/eta) grad p) = div(chi v)); false: "
+                               "fluid alone, particles as fixed obstacles (MODEL.md)", True)
     force_update: str = _key("choice", "when the pressure force on the particles is "
                              "evaluated: at each pressure solve and held in between "
                              '("solve"), or at every DEM step from the last pressure field '

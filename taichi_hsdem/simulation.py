@@ -213,6 +213,12 @@ class Simulation:
             self.active = arr(m.fluid_active.astype(np.int32), ti.i32)
             self.base = arr(np.where(m.fluid_active, m.kappa_free, 0.0))
             self.kappa = ti.ndarray(real, shape=(R, nx, ny))
+            self.carried = ti.Vector.ndarray(2, real, shape=(R, nx, ny))
+            # particle velocities the carried flux uses (see _source_velocities)
+            self.v_src = np.zeros((R, N, 2))
+            self.w_src = np.zeros((R, N))
+            self.vs = vec((R, N))
+            self.ws = ti.ndarray(real, shape=(R, N))
             self.pres = ti.ndarray(real, shape=(R, nx, ny))
             self.pres.fill(0)
             self.fg = arr(np.array([g.x_min, g.y_min, m.fluid_dx, fl.gap,
@@ -327,23 +333,44 @@ class Simulation:
                                  self.node_pos, self.node_area, self.node_meta, self.pres,
                                  self.active, self.fg, self.f_fluid, self.tau_fluid)
 
+    def _source_velocities(self):
+        """Velocities of the carried flux: each particle's current velocity averaged
+        half-and-half with the one used at the previous solve. The pressure lags the
+        particles by a whole update interval while they relax to their drift within
+        1/xi; with the raw velocity the lagged loop v -> 2u - v alternates, the
+        half-and-half average lands an isolated particle on u in one solve."""
+        st = self.state()
+        if self.fluid_solves == 0:
+            self.v_src, self.w_src = st["v"], st["omega"]
+        else:
+            self.v_src = 0.5 * (self.v_src + st["v"])
+            self.w_src = 0.5 * (self.w_src + st["omega"])
+        self.vs.from_numpy(self.v_src.astype(self._npr))
+        self.ws.from_numpy(self.w_src.astype(self._npr))
+
     def _update_fluid(self, force=False):
         from . import coupling
         m = self.model
+        flux = self.scene.fluid.particle_flux
+        if flux:
+            self._source_velocities()
         coupling.rasterize_permeability(self.x, self.th, self.alive, self.sp, self.tm, self.rb,
                                         self.kp, self.is_circle, self.trad, self.ls_phi,
-                                        self.ls_grad, self.ls_meta, self.ls_geo, self.base, self.kappa, self.fg)
+                                        self.ls_grad, self.ls_meta, self.ls_geo, self.base,
+                                        self.kappa, self.fg, self.vs, self.ws, self.carried)
         kappa = self.kappa.to_numpy().astype(float)
         self.fluid_updates += 1
         if not force and self._kappa_solved is not None:
             frac = self.scene.fluid.resolve_fraction
-            if frac > 0:
+            if frac > 0 and not flux:
                 changed = (kappa != self._kappa_solved).sum(axis=(1, 2)) / m.fluid_active.sum()
                 if changed.max() <= frac:
                     self._fluid_forces()          # same pressure, bodies have moved
                     return
         t0 = time.perf_counter()
-        pres, info = self.fluid.solve(kappa, x0=None)
+        pres, info = self.fluid.solve(
+            kappa, carried=self.carried.to_numpy().astype(float) if flux else None,
+            occupied=(kappa < m.kappa_free) & m.fluid_active if flux else None)
         self.fluid_seconds += time.perf_counter() - t0
         self.fluid_solves += 1
         self._kappa_solved = kappa
@@ -495,6 +522,9 @@ class Simulation:
                     break
                 xs[r, i], ths[r, i] = spot
                 vs[r, i] = 0.0
+                if self.fluid is not None:
+                    self.v_src[r, i] = 0.0
+                    self.w_src[r, i] = 0.0
                 alive[r, i] = 1
                 moved = True
         if moved:
