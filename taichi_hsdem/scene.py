@@ -180,7 +180,7 @@ class FluidConfig(_Config):
                                   "bilinear", choices=("bilinear", "cell"))
     particle_flux: bool = _key("bool", "conserve the mixture: moving particles carry "
                                "their volume (div((kappa/eta) grad p) = div(chi v)); false: "
-                               "fluid alone, particles as fixed obstacles (MODEL.md)", True)
+                               "fluid alone, particles as fixed obstacles (MODEL.md)", False)
     force_update: str = _key("choice", "when the pressure force on the particles is "
                              "evaluated: at each pressure solve and held in between "
                              '("solve"), or at every DEM step from the last pressure field '

@@ -481,7 +481,7 @@ def test_escapee_rate_matches_the_paper_formula(stream_phi01):
     # run measured 0.097-0.099 along the path, against phi_N = 0.098).
     # Tolerance 10 %: the lone disk's drift bias (+1 %, test above), the parked
     # time (-0.5 %) and the window-edge noise (~4 % pooled).
-    # Particles carry their volume (fluid.particle_flux, the default): without it
+    # Particles carry their volume (fluid.particle_flux = true, set here): without it
     # the measured rate was 1.19-1.31 times the formula (next test).
     out = stream_phi01
     phi_n = out["N"] * math.pi / 4 / (WIDTH * ESC_PATH)
@@ -493,7 +493,7 @@ def test_fixed_obstacle_model_outruns_the_formula():
     # fixed): the imposed Q squeezes round every particle, so at phi = 0.1 the
     # particles outrun Q/(HW) and the rate exceeds 4 phi Q / (H pi d^2) by 19-38 %
     # (frozen suspensions: mean drift / (Q/HW) = 1.04 at phi 0.02, 1.22 at 0.1,
-    # 1.8-2.2 at 0.3). The carried-flux default removes the excess (test above).
+    # 1.8-2.2 at 0.3). The carried flux removes the excess (test above).
     out = run_escapes(0.1, t_end=20.0, realizations=2, particle_flux=False)
     phi_n = out["N"] * math.pi / 4 / (WIDTH * ESC_PATH)
     assert out["rate"] > 1.1 * paper_rate(phi_n)
