@@ -90,7 +90,8 @@ class Model:
         return {"kind": "flow_rate", "Q": f.flow_rate, "p_out": f.p_out}
 
 
-def _shape(sp) -> shp.Shape:
+def species_shape(sp) -> shp.Shape:
+    """The shape template of one species table of a scene."""
     n = sp.nodes
     if sp.shape == "circle":
         return shp.circle(sp.diameter, n)
@@ -186,7 +187,7 @@ def resolve(scene: Scene) -> Model:
         problems.append(f"{src}: {key}: {msg}")
 
     try:
-        templates = [_shape(sp) for sp in scene.particles]
+        templates = [species_shape(sp) for sp in scene.particles]
     except ValueError as exc:
         raise SceneError([f"{src}: particles: {exc}"]) from None
     try:
@@ -262,7 +263,7 @@ def resolve(scene: Scene) -> Model:
         hidden = node_sagitta(t)
         if hidden > scene.contact.overlap_target * t.equivalent_diameter:
             need = sp.nodes
-            while need < 100000 and node_sagitta(_shape(sp.replace(nodes=need))) > \
+            while need < 100000 and node_sagitta(species_shape(sp.replace(nodes=need))) > \
                     scene.contact.overlap_target * t.equivalent_diameter:
                 need *= 2
             bad(f"{key}.nodes", f"{sp.nodes} surface nodes leave up to {hidden:.3g} "

@@ -456,6 +456,8 @@ class Simulation:
                 running[r] = 0
                 changed = True
                 continue
+            if res.clogged:
+                continue            # stop_at_clog = false: the stream goes on, the result is kept
             if escaped[r] > self.escaped_np[r]:
                 self.escaped_np[r] = escaped[r]
                 self.last_escape_t[r] = self.t
@@ -587,11 +589,14 @@ class Simulation:
         # realizations still running at the end: record where they stopped
         run_np = self.running.to_numpy()
         esc = self.escaped.to_numpy()
+        last_t = {r: t for r, t, _ in series}
         for r, res in enumerate(self.results):
             if res.status == "ok" and res.t_stop is None:
                 res.t_stop = self.t
-                res.escapees = int(esc[r])
-                series.append((r, self.t, int(esc[r])))
+                if not res.clogged:
+                    res.escapees = int(esc[r])
+                if last_t.get(r) != self.t:
+                    series.append((r, self.t, int(esc[r])))
         return self._result(wall, series)
 
     def _result(self, wall, series) -> Result:
