@@ -14,14 +14,6 @@ Examples
 >>> result = th.run(scene)                                               # doctest: +SKIP
 >>> result.summary["mean_escapees"]                                      # doctest: +SKIP
 """
-import os as _os
-
-# The pressure solve's vectors are small: OpenBLAS threads then only compete with
-# Taichi's for the cores (a solve measured 3x slower on 2 cores). Effective when
-# this package is imported before numpy; set the variable yourself to override.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    _os.environ.setdefault(_var, "1")
-
 __version__ = "0.1.0"
 
 from .scene import Scene, SceneError, load_scene, scene_to_toml  # noqa: E402

@@ -57,6 +57,12 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
         return _STATE["arch"]
     fp = ti.f64 if precision == "f64" else ti.f32
     target = {"cpu": ti.cpu, "gpu": ti.gpu, "auto": ti.gpu}[arch]
+    # Once Taichi's worker threads run, a multi-threaded BLAS call on the pressure
+    # solve's small vectors waits on them (measured: a 14,400-value dot product
+    # 8 ms instead of 3 us): one BLAS thread, limited at run time because numpy
+    # may have loaded before the environment variables could act.
+    from threadpoolctl import threadpool_limits
+    _STATE["blas_limit"] = threadpool_limits(limits=1, user_api="blas")
     # Taichi prints "Starting on arch=..." on stdout; stdout belongs to the user.
     with contextlib.redirect_stdout(io.StringIO()):
         ti.init(arch=target, default_fp=fp, default_ip=ti.i32, log_level=ti.ERROR,

@@ -72,7 +72,14 @@ def build_neighbors(x: ti.types.ndarray(), x_ref: ti.types.ndarray(), alive: ti.
                     j = cell_p[r, c, s]
                     if j != i and (x[r, j] - xi).norm() < rb[i] + rb[j] + skin:
                         if count < cap:
-                            nbr[r, i, count] = j
+                            # Keep the list sorted by index: the order in which forces
+                            # are summed must not depend on when (or, batched, why)
+                            # the list was built.
+                            slot = count
+                            while slot > 0 and nbr[r, i, slot - 1] > j:
+                                nbr[r, i, slot] = nbr[r, i, slot - 1]
+                                slot -= 1
+                            nbr[r, i, slot] = j
                         else:
                             flags[F_NBR_OVERFLOW] = 1
                         count += 1

@@ -383,10 +383,21 @@ class Simulation:
             self.u_ref = np.abs(info.flux_out) / m.geometry.constriction_width
             self._resolve_update_interval()
 
+    def _open_channel_speed(self) -> float:
+        """Mean fluid speed through the constriction of the channel without
+        particles: a property of the scene, the same for every realization, so
+        that no realization's numbers depend on the others run beside it."""
+        from .fluid import PressureSolver
+        m, fl = self.model, self.scene.fluid
+        solver = PressureSolver(m.fluid_active, m.fluid_dx, m.fluid_dx, fl.viscosity,
+                                m.bc(), n_batch=1, tol=fl.solver_tol, gap=fl.gap)
+        _, info = solver.solve(np.where(m.fluid_active, m.kappa_free, 0.0))
+        return float(np.abs(info.flux_out).max()) / m.geometry.constriction_width
+
     def _resolve_update_interval(self):
         """``fluid.update_interval = "auto"``: the fastest expected particle (the mean
         fluid speed through the constriction) crosses half a fluid cell between solves."""
-        u = float(np.max(self.u_ref))
+        u = self._open_channel_speed()
         given = self.scene.fluid.update_interval
         if given != "auto":
             travel = given * self.dt * u

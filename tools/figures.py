@@ -14,14 +14,8 @@ Each writes ``<figure>.png``, ``points.csv``, ``realizations.csv``, ``pmf.csv`` 
 prints one line per point and where it wrote. ``--realizations 100`` is the paper's
 sample size; ``--quick`` a smoke test for CI. Details: ``taichi_hsdem/figures.py``.
 """
-import os
 import pathlib
 import sys
-
-# The pressure solve's vectors are small; OpenBLAS threads then only compete with
-# Taichi's for the cores (3x slower solves measured on 2 cores). Must precede numpy.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
