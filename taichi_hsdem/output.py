@@ -115,6 +115,20 @@ class VideoRecorder:
         self.setup_seconds = time.perf_counter() - t0
         self.error = None
         self._fill_for = self._fill_index = None
+        self._children_cpu0 = self._children_cpu()
+        self.encoder_cpu_seconds = None
+
+    @staticmethod
+    def _children_cpu():
+        """CPU seconds of this process's finished child processes (the ffmpeg
+        encoder is one; its time is not in ``seconds``, as it encodes in
+        parallel, competing with the simulation for the cores)."""
+        try:
+            import resource
+        except ImportError:                     # not on Windows
+            return None
+        ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return ru.ru_utime + ru.ru_stime
 
     @staticmethod
     def _range_of(p):
@@ -198,6 +212,7 @@ class VideoRecorder:
                 "render_share_of_wall_time": share,
                 "setup_seconds": self.setup_seconds,
                 "finish_seconds": self.finish_seconds,
+                "encoder_cpu_seconds": self.encoder_cpu_seconds,
                 "error": self.error}
 
     def close(self, keep=True):
@@ -210,6 +225,9 @@ class VideoRecorder:
             if self.error is None:
                 self.error = f"{type(exc).__name__}: {exc}"
         self.finish_seconds += time.perf_counter() - t0
+        cpu = self._children_cpu()
+        if cpu is not None and self._children_cpu0 is not None:
+            self.encoder_cpu_seconds = cpu - self._children_cpu0
         self.renderer.close()
         if keep and self.error is None and self.tmp.exists():
             os.replace(self.tmp, self.path)
