@@ -36,6 +36,8 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--video", dest="video", action="store_true", default=None,
                    help="write video.mp4")
     v.add_argument("--no-video", dest="video", action="store_false", help="no video")
+    p.add_argument("--view", action="store_true",
+                   help="live window (needs a display): space pause, n step, s screenshot, Esc close")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     return p
 
@@ -118,15 +120,25 @@ def main(argv=None) -> int:
     recorder = None
     frame_times = None
     video_skipped = None
-    if sim.scene.output.video:
+    viewer = None
+    if args.view:
+        from .viewer import LiveViewer, display_available
+        ok, why = display_available()
+        if ok:
+            viewer = LiveViewer(out, title=f"taichi_hsdem: {sim.scene.name}")
+        else:
+            print(f"--view skipped: {why}", file=sys.stderr)
+    if sim.scene.output.video or viewer is not None:
         from .render import vulkan_status
         ok, why = vulkan_status()
         if ok:
-            recorder = VideoRecorder(sim, out / "video.mp4")
+            recorder = VideoRecorder(sim, out / "video.mp4" if sim.scene.output.video else None,
+                                     viewer=viewer)
             frame_times = recorder.frame_times
         else:
             video_skipped = why
-            _say(args.quiet, f"rendering skipped: {why}")
+            # the user asked for a picture: say so even with --quiet
+            print(f"rendering skipped: {why}", file=sys.stderr)
     progress = _Progress(args.quiet, sim.scene.run.t_end)
     try:
         result = sim.run(progress=progress, on_frame=recorder, frame_times=frame_times)
@@ -143,6 +155,11 @@ def main(argv=None) -> int:
             recorder.close(keep=False)
         print(f"run failed: {exc}", file=sys.stderr)
         return EXIT_FAILED
+    except BaseException:               # Ctrl-C or a bug: leave no half-written video
+        progress.close()
+        if recorder is not None:
+            recorder.close(keep=False)
+        raise
     progress.close()
     if recorder is not None:
         recorder.close(keep=True)

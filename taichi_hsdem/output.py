@@ -81,7 +81,8 @@ class VideoRecorder:
     goes on); :attr:`error` then says why and ``close`` keeps nothing.
     """
 
-    def __init__(self, sim, path: Path):
+    def __init__(self, sim, path: Path | None, viewer=None):
+        """``path=None``: draw for ``viewer`` only (``--view`` without ``--video``)."""
         import time
         from .render import Renderer, VideoWriter
         t0 = time.perf_counter()
@@ -106,9 +107,10 @@ class VideoRecorder:
                                  width=sc.output.width, pressure_shape=pshape,
                                  pressure_range=prange, title=sc.name,
                                  pressure_extent=extent)
-        self.path = Path(path)
-        self.tmp = self.path.with_name(self.path.name + ".part.mp4")
-        self.writer = VideoWriter(self.tmp, self.fps)
+        self.viewer = viewer
+        self.path = None if path is None else Path(path)
+        self.tmp = None if path is None else self.path.with_name(self.path.name + ".part.mp4")
+        self.writer = None if path is None else VideoWriter(self.tmp, self.fps)
         self.frames = 0
         self.seconds = 0.0          # drawing and encoding frames, inside the run
         self.finish_seconds = 0.0   # flushing the encoder at close
@@ -189,19 +191,22 @@ class VideoRecorder:
             esc = int(sim.escaped.to_numpy()[r])
             frame = self.renderer.draw(x, theta, sim.sp_np, alive, pressure=pres, t=sim.t,
                                        escapees=esc)
-            self.writer.write(frame)
+            if self.writer is not None:
+                self.writer.write(frame)
         except Exception as exc:        # a broken video must not lose the run
             self.error = f"{type(exc).__name__}: {exc}"
             return
         finally:
             self.seconds += time.perf_counter() - t0
         self.frames += 1
+        if self.viewer is not None:
+            self.viewer.show(sim, frame)       # outside the timing: it waits for keys
 
     def summary(self, wall_time_s: float) -> dict:
         """``summary.json``'s ``"video"`` entry; ``wall_time_s`` is the run's
         (which includes the frames' drawing and encoding)."""
         share = self.seconds / wall_time_s if wall_time_s > 0 else None
-        return {"file": None if self.error else self.path.name,
+        return {"file": None if self.error or self.path is None else self.path.name,
                 "frames": self.frames, "fps": self.fps, "realization": self.r,
                 "width": self.renderer.width, "height": self.renderer.height,
                 "pressure_range": (None if self.pressure_range is None
@@ -220,7 +225,8 @@ class VideoRecorder:
         import time
         t0 = time.perf_counter()
         try:
-            self.writer.close()
+            if self.writer is not None:
+                self.writer.close()
         except Exception as exc:
             if self.error is None:
                 self.error = f"{type(exc).__name__}: {exc}"
@@ -229,6 +235,10 @@ class VideoRecorder:
         if cpu is not None and self._children_cpu0 is not None:
             self.encoder_cpu_seconds = cpu - self._children_cpu0
         self.renderer.close()
+        if self.viewer is not None:
+            self.viewer.close()
+        if self.tmp is None:
+            return
         if keep and self.error is None and self.tmp.exists():
             os.replace(self.tmp, self.path)
         elif self.tmp.exists():

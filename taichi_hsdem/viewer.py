@@ -4,9 +4,9 @@ Keys: space pauses and resumes, ``n`` advances one frame while paused, ``s`` sav
 a screenshot (``screenshot_<t>.png`` in the output folder), Esc closes the window
 (the run goes on without it).
 
-The picture is drawn by :class:`taichi_hsdem.render.Renderer` (off-screen GGUI,
-one hidden window per process) and shown with Taichi's X11 ``ti.GUI``, so the
-viewer adds no second GGUI window.
+The picture is drawn by the video's renderer (off-screen GGUI, one hidden window
+per process) and shown with Taichi's X11 ``ti.GUI``, so the viewer adds no second
+GGUI window. Frames come at the video's times (``output.frames`` over ``t_end``).
 """
 from __future__ import annotations
 
@@ -24,23 +24,23 @@ def display_available() -> tuple[bool, str]:
 
 
 class LiveViewer:
-    """An ``on_frame`` callback for :meth:`Simulation.run` that shows each frame.
+    """Shows the frames a :class:`~taichi_hsdem.output.VideoRecorder` draws.
 
-    ``draw`` is a callable ``sim -> (H, W, 3) uint8 image`` (top-down), e.g. a
-    :class:`~taichi_hsdem.output.VideoRecorder`'s frame maker.
+    Pass it as the recorder's ``viewer``; :meth:`show` is called with each frame
+    (a top-down (H, W, 3) uint8 image) and returns when the run may go on.
     """
 
-    def __init__(self, draw, out_dir: Path, title="taichi_hsdem"):
+    def __init__(self, out_dir: Path, title="taichi_hsdem"):
         import taichi as ti
         self._ti = ti
-        self.draw = draw
         self.out_dir = Path(out_dir)
         self.title = title
         self.gui = None
+        self.closed = False
         self.paused = False
         self.screenshots: list[Path] = []
 
-    def _show(self, frame):
+    def _display(self, frame):
         ti = self._ti
         if self.gui is None:
             self.gui = ti.GUI(self.title, res=(frame.shape[1], frame.shape[0]))
@@ -48,38 +48,40 @@ class LiveViewer:
         self.gui.set_image(frame[::-1].transpose(1, 0, 2).astype(np.float32) / 255.0)
         self.gui.show()
 
-    def _handle(self, sim, frame) -> bool:
-        """Process pending keys; return True to advance."""
+    def handle_key(self, key, sim, frame) -> bool:
+        """Act on one key press; return True when the run may advance."""
         ti = self._ti
-        step = False
-        for e in self.gui.get_events(ti.GUI.PRESS):
-            if e.key == ti.GUI.ESCAPE:
-                self.close()
-                return True
-            if e.key == ti.GUI.SPACE:
-                self.paused = not self.paused
-            elif e.key == "n":
-                step = True
-            elif e.key == "s":
-                self.out_dir.mkdir(parents=True, exist_ok=True)
-                path = self.out_dir / f"screenshot_{sim.t:.6g}.png"
-                import imageio.v3 as iio
-                iio.imwrite(path, frame)
-                self.screenshots.append(path)
-        return step or not self.paused
+        if key == ti.GUI.ESCAPE:
+            self.close()
+            return True
+        if key == ti.GUI.SPACE:
+            self.paused = not self.paused
+        elif key == "n":
+            return True
+        elif key == "s":
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+            path = self.out_dir / f"screenshot_{sim.t:.6g}.png"
+            import imageio.v3 as iio
+            iio.imwrite(path, frame)
+            self.screenshots.append(path)
+        return not self.paused
 
-    def __call__(self, sim):
-        if self.draw is None:
+    def show(self, sim, frame):
+        if self.closed:
             return
-        frame = self.draw(sim)
-        self._show(frame)
+        self._display(frame)
         while self.gui is not None and self.gui.running:
-            if self._handle(sim, frame):
+            stepped = False
+            for e in self.gui.get_events(self._ti.GUI.PRESS):
+                stepped = self.handle_key(e.key, sim, frame) and e.key == "n" or stepped
+                if self.closed:
+                    return
+            if stepped or not self.paused:
                 return
-            self._show(frame)
+            self._display(frame)
 
     def close(self):
         if self.gui is not None:
             self.gui.close()
             self.gui = None
-        self.draw = None
+        self.closed = True
