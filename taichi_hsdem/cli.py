@@ -15,7 +15,9 @@ from pathlib import Path
 EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
 
 
-class _Parser(argparse.ArgumentParser):
+class Parser(argparse.ArgumentParser):
+    """argparse with the project's exit status for bad arguments (2, one line)."""
+
     def error(self, message):
         self.print_usage(sys.stderr)
         print(f"{self.prog}: {message}", file=sys.stderr)
@@ -23,7 +25,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="python -m taichi_hsdem",
+    p = Parser(prog="python -m taichi_hsdem",
                 description="Run a taichi_hsdem scene (LS-DEM + Hele-Shaw clogging simulation).")
     p.add_argument("scene", help="scene TOML file (see docs/scene.md)")
     p.add_argument("--out", help="output folder (default: the scene's output.dir, runs/<name>/)")

@@ -35,22 +35,16 @@ import sys
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
-EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
+from taichi_hsdem.cli import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser  # noqa: E402
+
 QUICK_REALIZATIONS, QUICK_ROUNDS, QUICK_T_FRACTION = 4, 3, 0.1
 CSV_COLUMNS = ("round", "value", "seed", "n", "n_unstable", "n_clogged", "escapees_total",
                "mean_escapees", "mean_escapees_ci_lo", "mean_escapees_ci_hi",
                "wall_time_s")
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        self.print_usage(sys.stderr)
-        print(f"{self.prog}: {message}", file=sys.stderr)
-        sys.exit(EXIT_INVALID)
-
-
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="tools/calibrate.py", description=__doc__.split("\n\n")[0])
+    p = Parser(prog="tools/calibrate.py", description=__doc__.split("\n\n")[0])
     p.add_argument("scene", help="scene TOML file")
     p.add_argument("--target", type=float, required=True, help="<s> to match (> 0)")
     p.add_argument("--param", default="particles.friction",

@@ -35,18 +35,11 @@ import sys
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
-EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        self.print_usage(sys.stderr)
-        print(f"{self.prog}: {message}", file=sys.stderr)
-        sys.exit(EXIT_INVALID)
+from taichi_hsdem.cli import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser  # noqa: E402
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="tools/sweep.py", description=__doc__.split("\n\n")[0])
+    p = Parser(prog="tools/sweep.py", description=__doc__.split("\n\n")[0])
     p.add_argument("sweep", help="sweep file (TOML)")
     p.add_argument("--out", help="output folder (default runs/<sweep file name>/)")
     p.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
