@@ -71,6 +71,11 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
     if arch == "gpu" and used in ("x64", "arm64"):
         raise BackendError("arch=gpu was requested but Taichi found no usable GPU "
                            "(CUDA, Vulkan or Metal); use --arch cpu or --arch auto")
+    if used in ("vulkan", "metal", "opengl", "gles") and precision == "f64":
+        # e.g. Mesa's software Vulkan when no CUDA device exists: the level-set
+        # kernels' f64 trigonometry does not compile there.
+        raise BackendError(f"the GPU backend found is {used}, which has no f64 kernels here; "
+                           f"use --arch cpu, or --set run.precision=\"f32\"")
     _STATE.update(request=(arch, precision), arch_request=arch, arch=used,
                   precision=precision, real=fp)
     return used
