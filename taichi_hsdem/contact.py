@@ -109,6 +109,21 @@ def grid_sample(data: ti.template(), gdata: ti.template(), off, nx, ny, ox, oy, 
 
 
 @ti.func
+def template_sample(ls_phi: ti.template(), ls_grad: ti.template(), ls_meta: ti.template(),
+                    ls_geo: ti.template(), t, q):
+    """Level set of template ``t`` and its gradient at body-frame point ``q``."""
+    phi, g = grid_sample(ls_phi, ls_grad, ls_meta[t, 0], ls_meta[t, 1], ls_meta[t, 2],
+                         ls_geo[t, 0], ls_geo[t, 1], ls_geo[t, 2], q)
+    return phi, g
+
+
+@ti.func
+def node_world(node_pos: ti.template(), n, x, c, s):
+    """World position of surface node ``n`` of a body at ``x`` turned by (c, s)."""
+    return x + rot(c, s, vec2(node_pos[n, 0], node_pos[n, 1]))
+
+
+@ti.func
 def contact_law(depth, n, u, fs_old, kn, ks, mu, gamma, dt):
     """Normal and updated shear force of one contact point (see module doc)."""
     un = u.dot(n)
@@ -208,9 +223,7 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             mu = pair[a, b, PAIR_MU]
             meff = mass[i] * mass[j] / (mass[i] + mass[j])
             gamma = pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
-            centre, _ = grid_sample(ls_phi, ls_grad, ls_meta[tj, 0], ls_meta[tj, 1], ls_meta[tj, 2],
-                                    ls_geo[tj, 0], ls_geo[tj, 1], ls_geo[tj, 2],
-                                    rot_t(cj, sj, xi - xj))
+            centre, _ = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, tj, rot_t(cj, sj, xi - xj))
             if centre < 0.0:
                 ti.atomic_or(bad[r], BAD_PASSED)
             # (a) nodes of i inside j: force on i, history owned by i.
@@ -218,10 +231,9 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             ma = 0.0
             na = 0
             for k in range(nn_i):
-                p = xi + rot(ci, si, vec2(node_pos[noff_i + k, 0], node_pos[noff_i + k, 1]))
+                p = node_world(node_pos, noff_i + k, xi, ci, si)
                 qb = rot_t(cj, sj, p - xj)
-                phi, g = grid_sample(ls_phi, ls_grad, ls_meta[tj, 0], ls_meta[tj, 1], ls_meta[tj, 2],
-                                     ls_geo[tj, 0], ls_geo[tj, 1], ls_geo[tj, 2], qb)
+                phi, g = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, tj, qb)
                 if phi < 0.0 and g.norm() > 0.0:
                     nrm = rot(cj, sj, g.normalized())
                     u = (vi + spin(wi, p - xi)) - (vj + spin(wj, p - xj))
@@ -238,10 +250,9 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             nb = 0
             noff_j = node_meta[tj, 0]
             for k in range(node_meta[tj, 1]):
-                p = xj + rot(cj, sj, vec2(node_pos[noff_j + k, 0], node_pos[noff_j + k, 1]))
+                p = node_world(node_pos, noff_j + k, xj, cj, sj)
                 qb = rot_t(ci, si, p - xi)
-                phi, g = grid_sample(ls_phi, ls_grad, ls_meta[ti_, 0], ls_meta[ti_, 1], ls_meta[ti_, 2],
-                                     ls_geo[ti_, 0], ls_geo[ti_, 1], ls_geo[ti_, 2], qb)
+                phi, g = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, ti_, qb)
                 if phi < 0.0 and g.norm() > 0.0:
                     nrm = rot(ci, si, g.normalized())
                     u = (vj + spin(wj, p - xj)) - (vi + spin(wi, p - xi))
@@ -272,7 +283,7 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
         mw = 0.0
         nw = 0
         for k in range(nn_i):
-            p = xi + rot(ci, si, vec2(node_pos[noff_i + k, 0], node_pos[noff_i + k, 1]))
+            p = node_world(node_pos, noff_i + k, xi, ci, si)
             phi, g = wall_depth(wall, wall_grad, wall_meta, prm, p)
             if phi < 0.0 and g.norm() > 0.0:
                 nrm = g.normalized()

@@ -15,7 +15,7 @@
 import numpy as np
 from .backend import ti  # sets the environment before Taichi loads
 
-from .contact import cross, grid_sample, rot, rot_t, spin
+from .contact import cross, node_world, rot, rot_t, spin, template_sample
 
 vec2 = ti.math.vec2
 
@@ -39,8 +39,7 @@ def inside_body(tm, is_circle: ti.template(), trad: ti.template(), ls_phi: ti.te
     if is_circle[tm] != 0:
         inside = q.norm() <= trad[tm]
     else:
-        phi, g = grid_sample(ls_phi, ls_grad, ls_meta[tm, 0], ls_meta[tm, 1], ls_meta[tm, 2],
-                             ls_geo[tm, 0], ls_geo[tm, 1], ls_geo[tm, 2], q)
+        phi, g = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, tm, q)
         inside = phi <= 0.0
     return inside
 
@@ -144,7 +143,7 @@ def pressure_forces(x: ti.types.ndarray(), th: ti.types.ndarray(),
             s = ti.sin(th[r, i])
             off = node_meta[tm[i], 0]
             for k in range(node_meta[tm[i], 1]):
-                p = xi + rot(c, s, vec2(node_pos[off + k, 0], node_pos[off + k, 1]))
+                p = node_world(node_pos, off + k, xi, c, s)
                 sigma = sample_pressure(pres, active, r, p, ox, oy, h, mode)
                 df = -sigma * gap * rot(c, s, vec2(node_area[off + k, 0], node_area[off + k, 1]))
                 fsum += df

@@ -1095,23 +1095,26 @@ def _assign(table: dict, key: str, value: Any) -> None:
         table[key] = value
 
 
-def _read_toml(path: Path) -> dict:
+def read_toml(path: Path, what: str = "scene", error: type = None) -> dict:
+    """A TOML file as a dict; every way it can fail becomes ``error`` (default
+    :class:`SceneError`) with one line naming the file (``what`` it should be)."""
+    error = error or SceneError
     try:
         data = path.read_bytes()
     except FileNotFoundError:
-        raise SceneError(f"{path}: file not found") from None
+        raise error(f"{path}: file not found") from None
     except IsADirectoryError:
-        raise SceneError(f"{path}: is a folder, not a scene file") from None
-    except OSError as error:
-        raise SceneError(f"{path}: cannot read: {error.strerror or error}") from None
+        raise error(f"{path}: is a folder, not a {what} file") from None
+    except OSError as exc:
+        raise error(f"{path}: cannot read: {exc.strerror or exc}") from None
     try:
         text = data.decode("utf-8")
-    except UnicodeDecodeError as error:
-        raise SceneError(f"{path}: not UTF-8 text (byte {error.start})") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not UTF-8 text (byte {exc.start})") from None
     try:
         return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise SceneError(f"{path}: invalid TOML: {error}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: invalid TOML: {exc}") from None
 
 
 def load_scene(source: str | Path | Mapping[str, Any],
@@ -1144,7 +1147,7 @@ def load_scene(source: str | Path | Mapping[str, Any],
         raw, label, stem = copy.deepcopy(dict(source)), "<dict>", "scene"
     elif isinstance(source, (str, Path)):
         path = Path(source)
-        raw, label, stem = _read_toml(path), str(path), path.stem
+        raw, label, stem = read_toml(path), str(path), path.stem
     else:
         raise TypeError(f"source must be a path or a dict, got {type(source).__name__}")
     if isinstance(overrides, str):

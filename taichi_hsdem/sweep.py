@@ -60,12 +60,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from . import stats
-from .scene import Scene, SceneError, _toml_value, load_scene, scene_to_toml
-
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib
+from .scene import Scene, SceneError, _toml_value, load_scene, read_toml, scene_to_toml
 
 __all__ = [
     "SweepError", "Sweep", "load_sweep", "expand_grid", "point_folder", "run_sweep",
@@ -179,23 +174,6 @@ class Sweep:
     description: str = ""
 
 
-def _read_sweep_toml(path: Path) -> dict:
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise SweepError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise SweepError(f"{path}: is a folder, not a sweep file") from None
-    except OSError as error:
-        raise SweepError(f"{path}: cannot read: {error.strerror or error}") from None
-    except UnicodeDecodeError as error:
-        raise SweepError(f"{path}: not UTF-8 text (byte {error.start})") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise SweepError(f"{path}: invalid TOML: {error}") from None
-
-
 def load_sweep(path: str | Path) -> Sweep:
     """Read a sweep file (module notes give the format) and check every point.
 
@@ -208,7 +186,7 @@ def load_sweep(path: str | Path) -> Sweep:
         With every problem, one ``"FILE: where: problem"`` line each.
     """
     path = Path(path)
-    raw = _read_sweep_toml(path)
+    raw = read_toml(path, "sweep", SweepError)
     label = str(path)
     problems: list[str] = []
 
