@@ -17,7 +17,17 @@ Examples
 __version__ = "0.1.0"
 
 from .scene import Scene, SceneError, load_scene, scene_to_toml  # noqa: E402
-from .simulation import Result, RunError, Simulation  # noqa: E402
+
+_LAZY = ("Result", "RunError", "Simulation")
+
+
+def __getattr__(name):
+    # The simulator imports Taichi (about a second); the pressure-solver worker
+    # processes (:mod:`.solver_pool`) import this package and never need it.
+    if name in _LAZY:
+        from . import simulation
+        return getattr(simulation, name)
+    raise AttributeError(f"module 'taichi_hsdem' has no attribute {name!r}")
 
 
 def run(scene, overrides=(), progress=None) -> "Result":
@@ -29,6 +39,7 @@ def run(scene, overrides=(), progress=None) -> "Result":
         scene = load_scene(scene, overrides)
     elif overrides:
         raise TypeError("overrides apply to a path or dict; use load_scene(...) for a Scene")
+    from .simulation import Simulation
     return Simulation(scene).run(progress=progress)
 
 

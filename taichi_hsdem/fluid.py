@@ -31,18 +31,25 @@ Examples
 from __future__ import annotations
 
 import time
+import warnings
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
-import pyamg
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
+
+from . import solver_pool
 
 # Most preconditioned CG iterations one realization may take in one solve.
 # Ruge-Stuben-preconditioned CG needs about 10 for a relative residual of 1e-8 at
 # permeability contrasts of 1e3-1e6 on a 160 x 135 grid, so reaching this limit
-# means the solve failed; the flux check then reports it.
+# means the solve failed; the flux check then reports it. The hierarchy options
+# are solver_pool.AMG_OPTIONS.
 MAXITER = 200
+
+# Seconds of solving after which a solver with workers > 1 starts using them.
+POOL_AFTER_SECONDS = 2.0
 
 _SIDES = ("left", "right", "bottom", "top")
 
@@ -224,12 +231,22 @@ class PressureSolver:
         Relative residual ``|b - A p| / |b|`` of the CG solve, in (0, 1).
     gap : float, optional
         Plate spacing ``H``, m; needed for ``flow_rate``.
+    workers : int
+        Processes that share the realizations' solves (1: all in this process).
+        Each realization is solved the same way wherever it runs, so the answer
+        does not depend on ``workers``; if a worker fails, the solver warns and
+        goes on in this process. See :mod:`taichi_hsdem.solver_pool`.
+    pool_after : float
+        Solve in this process until the solves have taken this many seconds, then
+        move to the workers: starting a worker costs about a second of CPU (its
+        imports), which a short run never earns back.
 
     Notes
     -----
     *One hierarchy per realization.* The realizations share one sparsity pattern
     (the block-diagonal matrix's blocks are alike), but each realization gets its
-    own Ruge-Stuben hierarchy and CG solve. On a 160 x 135 grid at a contrast of
+    own Ruge-Stuben hierarchy and CG solve, in this process or in the worker
+    process that owns it (realization ``r`` goes to worker ``r % workers``). On a 160 x 135 grid at a contrast of
     1e3 this costs about what one hierarchy of the block-diagonal matrix does
     (R = 10, best of 7: set-up 0.26 s against 0.25 s, cold solve 0.35 s against
     0.31 s), and it lets a realization whose permeability did not change keep its
@@ -279,7 +296,8 @@ class PressureSolver:
     5.8
     """
 
-    def __init__(self, active, dx, dy, viscosity, bc, n_batch=1, tol=1e-8, gap=None):
+    def __init__(self, active, dx, dy, viscosity, bc, n_batch=1, tol=1e-8, gap=None,
+                 workers=1, pool_after=POOL_AFTER_SECONDS):
         t_start = time.perf_counter()
         active = np.array(active, dtype=bool)  # a copy: the caller may reuse theirs
         if active.ndim != 2:
@@ -291,12 +309,21 @@ class PressureSolver:
             raise ValueError(f"n_batch must be an int >= 1, got {n_batch}")
         if not 0 < tol < 1:
             raise ValueError(f"tol must lie in (0, 1), got {tol}")
+        if not (isinstance(workers, (int, np.integer)) and workers >= 1):
+            raise ValueError(f"workers must be an int >= 1, got {workers}")
         self.shape = active.shape
         self.dx, self.dy, self.viscosity = float(dx), float(dy), float(viscosity)
         self.n_batch, self.tol = int(n_batch), float(tol)
         self.active = active
         self._parse_bc(bc, gap)
         self._build_pattern()
+        self.workers = int(min(workers, self.n_batch))
+        self.pool_after = float(pool_after)
+        self._pool = solver_pool.pool()
+        self._token = self._pool.token()
+        self._pattern_at = set()  # where the pattern was sent: "local" or (generation, w)
+        self._finalizer = weakref.finalize(self, _release, self._token)
+        self._finalizer.atexit = False
         self._stats = {"solves": 0, "rebuilds": 0, "setup_seconds": 0.0,
                        "solve_seconds": 0.0,
                        "init_seconds": time.perf_counter() - t_start}
@@ -424,7 +451,7 @@ class PressureSolver:
 
         R = self.n_batch
         self._kappa_seen = np.full((R, n), np.nan)  # NaN: every realization is new
-        self._hierarchy = [None] * R
+        self._data = np.zeros((R, self._perm.size))  # CSR values of each realization
         self._rhs = np.zeros((R, n))
         self._pinned = np.zeros((R, n), dtype=bool)
         self._blocked = np.zeros(R, dtype=bool)
@@ -477,16 +504,9 @@ class PressureSolver:
             rhs[:, self._ic] += share
             self._share[which] = share
             blocked |= total[:, 0] == 0
-        data = np.concatenate([diagonal, -T, -T], axis=1)[:, self._perm]
-
-        for row, r in enumerate(which):
-            # Own arrays: eliminate_zeros prunes them in place, the hierarchy keeps a
-            # reference to its matrix, and pyamg's C++ core reads a strided row of
-            # `data` (fancy indexing can lay it out column-major) as garbage.
-            A = sp.csr_array((np.ascontiguousarray(data[row]), self._indices.copy(),
-                              self._indptr.copy()), shape=(n, n))
-            A.eliminate_zeros()
-            self._hierarchy[r] = pyamg.ruge_stuben_solver(A)
+        # Row-major rows: pyamg's C++ core reads a strided row (fancy indexing can
+        # lay `data` out column-major) as garbage.
+        self._data[which] = np.concatenate([diagonal, -T, -T], axis=1)[:, self._perm]
         self._rhs[which] = rhs
         self._pinned[which] = pinned
         self._blocked[which] = blocked
@@ -593,19 +613,9 @@ class PressureSolver:
         if carried is not None:
             rhs = rhs + self._carried_source(carried, occupied)
             rhs[self._pinned] = 0.0
-        x = np.zeros((R, n))
-        iterations, residual = 0, 0.0
+        x, its, res = self._solve_all(changed, rhs, guess)
+        iterations, residual = int(its.max(initial=0)), float(res.max(initial=0.0))
         bnorm = np.linalg.norm(rhs, axis=1)
-        for r in range(R):
-            if bnorm[r] == 0.0:  # no driving at all: the SPD system's answer is 0
-                continue
-            history = []
-            x[r] = self._hierarchy[r].solve(rhs[r], x0=guess[r], tol=self.tol,
-                                            maxiter=MAXITER, accel="cg",
-                                            residuals=history)
-            iterations = max(iterations, len(history) - 1)
-            A = self._hierarchy[r].levels[0].A
-            residual = max(residual, np.linalg.norm(rhs[r] - A @ x[r]) / bnorm[r])
         self._last = x
 
         flux_in, flux_out = self._boundary_fluxes(x, k)
@@ -624,6 +634,61 @@ class PressureSolver:
                          residual=float(residual), rebuilt=bool(changed.size),
                          blocked=self._blocked.copy())
         return (pressure[0] if single else pressure), info
+
+    def _solve_all(self, changed, rhs, guess):
+        """Solve every realization, in worker processes when ``workers > 1``;
+        rebuild the hierarchies of ``changed``. Returns x (R, n), iterations (R,),
+        relative residuals (R,)."""
+        R = self.n_batch
+        if self.workers > 1 and self._stats["solve_seconds"] >= self.pool_after:
+            try:
+                return self._solve_pooled(changed, rhs, guess)
+            except solver_pool.PoolError as exc:
+                warnings.warn(f"{exc}\nthe pressure solves go on in this process "
+                              "(fluid.workers = 1)", RuntimeWarning, stacklevel=3)
+                self.workers = 1
+                changed = np.arange(R)  # the workers' hierarchies are gone
+        pattern = None if "local" in self._pattern_at else self._pattern()
+        self._pattern_at.add("local")
+        x, its, res, setup = solver_pool.solve_block(
+            self._token, pattern, range(R), {int(r): self._data[r] for r in changed},
+            rhs, guess, self.tol, MAXITER)
+        self._stats["setup_seconds"] += setup
+        return x, its, res
+
+    def _solve_pooled(self, changed, rhs, guess):
+        R, W = self.n_batch, self.workers
+        generation = self._pool.generation
+        fresh = set(int(r) for r in changed)
+        calls, owned = [], []
+        for w in range(W):
+            rows = list(range(w, R, W))
+            first = (generation, w) not in self._pattern_at
+            if first:  # a new worker knows nothing: send the pattern and every matrix
+                fresh.update(rows)
+            calls.append(("solve_block", (
+                self._token, self._pattern() if first else None, rows,
+                {r: self._data[r] for r in rows if r in fresh}, rhs[rows], guess[rows],
+                self.tol, MAXITER)))
+            owned.append(rows)
+        replies = self._pool.map(calls)
+        if self._pool.generation != generation:  # pragma: no cover - map raises first
+            raise solver_pool.PoolError("the worker pool was restarted during a solve")
+        self._pattern_at.update((generation, w) for w in range(W))
+        x = np.zeros((R, self._n))
+        its, res = np.zeros(R, dtype=int), np.zeros(R)
+        for rows, (xw, itw, rw, setup) in zip(owned, replies):
+            x[rows], its[rows], res[rows] = xw, itw, rw
+        self._stats["setup_seconds"] += max(reply[3] for reply in replies)
+        return x, its, res
+
+    def _pattern(self):
+        return (self._n, self._indptr, self._indices)
+
+    def close(self):
+        """Free this solver's hierarchies here and in the worker processes (also
+        done when the solver is garbage-collected)."""
+        self._finalizer()
 
     def _carried_source(self, carried, occupied):
         """Right-hand side of the particles' carried flux: each interior face takes
@@ -733,6 +798,11 @@ class PressureSolver:
         (building the sparsity pattern).
         """
         return dict(self._stats)
+
+
+def _release(token):
+    solver_pool.forget(token)
+    solver_pool.pool().forget(token)
 
 
 def _require(bc, keys, kind):

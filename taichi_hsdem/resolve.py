@@ -64,6 +64,7 @@ class Model:
     fluid_dx: float | None = None
     fluid_shape: tuple[int, int] | None = None
     fluid_active: np.ndarray | None = None
+    fluid_workers: int = 1
     kappa_free: float = 0.0
     notes: dict[str, str] = field(default_factory=dict)
 
@@ -370,6 +371,15 @@ def resolve(scene: Scene) -> Model:
         model.fluid_dx = dx
         model.fluid_shape = (nx, ny)
         values["fluid.cell_size"] = dx
+        workers = f.workers
+        if workers == "auto":
+            from .solver_pool import usable_cpus
+            cpus = usable_cpus()
+            workers = max(1, min(cpus, scene.run.realizations))
+            notes["fluid.workers"] = (f"one process per usable CPU ({cpus}), at most one per "
+                                      f"realization ({scene.run.realizations})")
+            values["fluid.workers"] = workers
+        model.fluid_workers = int(min(workers, scene.run.realizations))
     model.scene = scene.with_values(values)
     return model
 

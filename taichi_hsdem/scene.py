@@ -161,7 +161,7 @@ class FluidConfig(_Config):
     gap: float = _key("float", "H, plate spacing and particle thickness, m",
                       required=True, gt=0)
     cell_size: float | str = _key("float", 'fluid cell edge, m; "auto": smallest '
-                                  "particle d_eq / 8", AUTO, auto=True, gt=0)
+                                  "particle d_eq / 6", AUTO, auto=True, gt=0)
     bc: str = _key("choice", '"pressure": p_in and p_out; "flow_rate": flow_rate in, '
                    "p_out out", "pressure", choices=("pressure", "flow_rate"))
     p_in: float | None = _key("float", 'inlet pressure, Pa (required for bc = "pressure")')
@@ -176,6 +176,10 @@ class FluidConfig(_Config):
                                    "dimensionless", 0.0, ge=0, lt=1)
     solver_tol: float = _key("float", "relative residual of the multigrid solve, "
                              "dimensionless", 1e-8, gt=0, le=1e-2)
+    workers: int | str = _key("int", "processes that share the realizations' pressure "
+                              'solves; "auto": one per usable CPU, at most one per '
+                              "realization (the answer does not depend on it)", AUTO,
+                              auto=True, ge=1)
     pressure_sampling: str = _key("choice", "how a surface node reads the pressure",
                                   "bilinear", choices=("bilinear", "cell"))
     particle_flux: bool = _key("bool", "conserve the mixture: moving particles carry "

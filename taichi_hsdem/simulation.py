@@ -208,7 +208,8 @@ class Simulation:
             fl = self.scene.fluid
             nx, ny = m.fluid_shape
             self.fluid = PressureSolver(m.fluid_active, m.fluid_dx, m.fluid_dx, fl.viscosity,
-                                        m.bc(), n_batch=R, tol=fl.solver_tol, gap=fl.gap)
+                                        m.bc(), n_batch=R, tol=fl.solver_tol, gap=fl.gap,
+                                        workers=m.fluid_workers)
             self.active_np = m.fluid_active
             self.active = arr(m.fluid_active.astype(np.int32), ti.i32)
             self.base = arr(np.where(m.fluid_active, m.kappa_free, 0.0))

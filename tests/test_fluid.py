@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from taichi_hsdem import fluid
+from taichi_hsdem import solver_pool
 from taichi_hsdem.fluid import (FluxImbalanceError, PressureSolver,
                                 circular_inclusion_error, circular_inclusion_pressure,
                                 free_permeability, kozeny_carman)
@@ -133,10 +134,10 @@ def test_hierarchy_reused_when_kappa_unchanged_and_rebuilt_when_changed():
     solver = PressureSolver(np.ones(shape, bool), 1.0, 1.0, 1.0, PRESSURE_BC, tol=1e-10)
     p, info = solver.solve(kappa)
     assert info.rebuilt and solver.stats["rebuilds"] == 1
-    hierarchy = solver._hierarchy[0]
+    hierarchy = solver_pool._CACHE[solver._token, 0]
     p_again, info = solver.solve(kappa.copy())
     assert not info.rebuilt and solver.stats["rebuilds"] == 1
-    assert solver._hierarchy[0] is hierarchy
+    assert solver_pool._CACHE[solver._token, 0] is hierarchy
     assert info.iterations == 0  # the warm start is the converged answer
     # Values in walls do not count as a change: there are none here, so change
     # one active cell.
@@ -276,3 +277,72 @@ def test_user_errors_are_reported():
     kappa[1, 3, 2] = -1.0
     with pytest.raises(ValueError, match=r"realization 1 .* cell \(3, 2\)"):
         solver.solve(kappa)
+
+
+def _changing_batches(shape, R, count):
+    """Permeability batches as in a run: each call moves the inclusions of some
+    realizations and leaves one realization unchanged."""
+    for step in range(count):
+        yield np.stack([random_disks(shape, seed=10 * r + (step if r != 1 else 0))
+                        for r in range(R)])
+
+
+def test_worker_processes_give_the_in_process_answer_bit_for_bit():
+    shape, R = (48, 36), 3
+    bc = {"kind": "flow_rate", "Q": 2.0, "p_out": 1.0}
+    serial = PressureSolver(np.ones(shape, bool), 0.5, 0.5, 2.0, bc, n_batch=R, gap=0.5)
+    pooled = PressureSolver(np.ones(shape, bool), 0.5, 0.5, 2.0, bc, n_batch=R, gap=0.5,
+                            workers=2, pool_after=0.0)
+    assert pooled.workers == 2
+    for kappas in _changing_batches(shape, R, 3):
+        p1, info1 = serial.solve(kappas)
+        p2, info2 = pooled.solve(kappas)
+        # Same matrix, same guess, same algorithm: identical floating-point work.
+        np.testing.assert_array_equal(p1, p2)
+        np.testing.assert_array_equal(info1.flux_out, info2.flux_out)
+        assert info1.iterations == info2.iterations
+    assert serial.stats["rebuilds"] == pooled.stats["rebuilds"] == 3 + 2 + 2
+    assert pooled.workers == 2  # no fallback happened
+
+
+def test_a_dead_worker_is_reported_and_the_solve_goes_on_in_process():
+    shape, R = (40, 30), 2
+    serial = PressureSolver(np.ones(shape, bool), 1.0, 1.0, 1.0, PRESSURE_BC, n_batch=R)
+    pooled = PressureSolver(np.ones(shape, bool), 1.0, 1.0, 1.0, PRESSURE_BC, n_batch=R,
+                            workers=2, pool_after=0.0)
+    batches = list(_changing_batches(shape, R, 2))
+    serial.solve(batches[0])
+    pooled.solve(batches[0])
+    victim = solver_pool.pool().workers[1].proc
+    victim.kill()
+    victim.wait()
+    with pytest.warns(RuntimeWarning, match="go on in this process"):
+        p2, info2 = pooled.solve(batches[1])
+    p1, info1 = serial.solve(batches[1])
+    assert pooled.workers == 1
+    # The in-process solve rebuilt every hierarchy from the same matrices and
+    # started from the same last solution: the same answer, bit for bit.
+    np.testing.assert_array_equal(p1, p2)
+    # Later solvers get a fresh pool.
+    again = PressureSolver(np.ones(shape, bool), 1.0, 1.0, 1.0, PRESSURE_BC, n_batch=R,
+                           workers=2, pool_after=0.0)
+    p3, _ = again.solve(batches[1])
+    assert again.workers == 2
+    np.testing.assert_allclose(p3, p1, rtol=0, atol=1e-7)
+
+
+def test_workers_start_only_after_the_solves_took_pool_after_seconds():
+    shape, R = (40, 30), 2
+    batches = list(_changing_batches(shape, R, 3))
+    serial = PressureSolver(np.ones(shape, bool), 1.0, 1.0, 1.0, PRESSURE_BC, n_batch=R)
+    late = PressureSolver(np.ones(shape, bool), 1.0, 1.0, 1.0, PRESSURE_BC, n_batch=R,
+                          workers=2, pool_after=1e-9)
+    p1, _ = serial.solve(batches[0])
+    p2, _ = late.solve(batches[0])  # solve_seconds was 0: in this process
+    assert late._pattern_at == {"local"}
+    np.testing.assert_array_equal(p1, p2)
+    for kappas in batches[1:]:      # then in the workers, from where it stood
+        p1, _ = serial.solve(kappas)
+        p2, _ = late.solve(kappas)
+        np.testing.assert_array_equal(p1, p2)
+    assert any(isinstance(where, tuple) for where in late._pattern_at)

@@ -4,18 +4,22 @@
     python tools/bench.py --quick         # R = 1, 10 only, shorter runs
     python tools/bench.py --arch gpu      # on a GPU machine
     python tools/bench.py --cases disks-0.26-R10,paper-disks-0.26-R1
+    python tools/bench.py --cases disks-0.26-R10@fluid.workers=1,disks-0.26-R10
 
 Cases: disks and squares at packing fractions 0.17 and 0.26 in the vani channel
 (scenes/vani_phi026.toml; squares from scenes/squares.toml with the same count),
 realizations 1, 10, 100; and a paper-like case (the paper's time step 3.75e-7 s and
 a pressure solve every 1e4 steps) to compare with the auto settings in one run.
+A case name may end in ``@key=value`` overrides (as ``--set``), one ``@`` each, to
+time one knob against the default in the same run.
 
 Each case runs in its own process (so peak memory is the case's own), first a few
 steps to compile, then ``--sim-time`` seconds of simulated time timed as a whole.
 Reported per case: DEM steps per second, surface-node (or disk-pair) contact
 evaluations per second over whole steps, simulated realization-seconds per wall
 second, realization pressure solves per second and the solve's share of wall
-time, peak resident memory.
+time, peak resident memory of the simulation process and of the pressure-solver
+worker processes (``fluid.workers``).
 """
 import argparse
 import json
@@ -43,6 +47,7 @@ def cases(quick):
 
 
 def overrides(case, sim_time):
+    case, *extra = case.split("@")
     parts = case.split("-")
     paper = parts[0] == "paper"
     if paper:
@@ -59,7 +64,27 @@ def overrides(case, sim_time):
         ov.append(f"particles.count={int(round(phi * area / side ** 2))}")
     if paper:
         ov += [f"run.dt={PAPER_DT}", f"fluid.update_interval={PAPER_FLUID_EVERY}"]
-    return scene, ov
+    return scene, ov + extra
+
+
+def _rss_mb(pid, field="VmHWM"):
+    """Peak (VmHWM) or current (VmRSS) resident memory of a process, MB; None if
+    unknown."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return round(int(line.split()[1]) / 1024, 1)
+    except OSError:
+        return None
+    return None
+
+
+def _total_rss_mb():
+    """Current resident memory of this process and its solver workers, MB."""
+    from taichi_hsdem import solver_pool
+    pids = [os.getpid()] + [w.proc.pid for w in solver_pool.pool().workers]
+    return sum(_rss_mb(pid, "VmRSS") or 0.0 for pid in pids)
 
 
 def run_case(case, arch, precision, sim_time):
@@ -69,10 +94,18 @@ def run_case(case, arch, precision, sim_time):
     scene_path, ov = overrides(case, sim_time)
     ov += [f'run.arch="{arch}"', f'run.precision="{precision}"']
     sim = Simulation(load_scene(scene_path, ov))
+    if sim.fluid is not None:
+        sim._update_fluid(force=True)  # run()'s first solve: starts the solver processes
     sim.step(5)                      # compile every kernel before timing
     solves0, fluid_s0, steps0 = sim.fluid_solves, sim.fluid_seconds, sim.steps
+    samples = []                     # (simulated time, resident MB): flat over the run?
+
+    def progress(t, t_end):
+        if not samples or t >= samples[-1][0] + t_end / 8:
+            samples.append((t, _total_rss_mb()))
+
     t0 = time.perf_counter()
-    sim.run()
+    sim.run(progress=progress)
     wall = time.perf_counter() - t0
     steps = sim.steps - steps0
     # contact evaluations per step, from the final neighbour lists
@@ -89,6 +122,12 @@ def run_case(case, arch, precision, sim_time):
                 js = nb[r, i, :nbr[r, i]]
                 evals += int(nbr[r, i] * nodes[i] + nodes[js].sum() + nodes[i])
     solves = (sim.fluid_solves - solves0) * sim.R
+    workers = sim.fluid.workers if sim.fluid is not None else 0
+    worker_rss = []
+    if workers > 1:
+        from taichi_hsdem import solver_pool
+        worker_rss = [_rss_mb(w.proc.pid) for w in solver_pool.pool().workers]
+    half = len(samples) // 2
     return {
         "case": case, "arch": sim.arch, "precision": precision,
         "realizations": sim.R, "particles": sim.N, "dt": sim.dt,
@@ -99,7 +138,12 @@ def run_case(case, arch, precision, sim_time):
         "realization_sim_s_per_wall_s": round(sim.R * (sim.t - 0.0) / wall, 6),
         "pressure_solves_per_s": round(solves / wall, 2),
         "pressure_share": round((sim.fluid_seconds - fluid_s0) / wall, 3),
+        "fluid_workers": workers,
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+        "worker_peak_rss_mb": worker_rss,
+        # resident memory (process + workers) over the run's first and second half
+        "rss_mb_first_half_max": max((m for _, m in samples[:half]), default=None),
+        "rss_mb_second_half_max": max((m for _, m in samples[half:]), default=None),
     }
 
 

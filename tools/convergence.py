@@ -2,6 +2,7 @@
 
     python tools/convergence.py pressure [--quick] [--out DIR]
     python tools/convergence.py contact  [--quick] [--out DIR]
+    python tools/convergence.py escapees [--quick] [--out DIR] [--realizations N]
 
 ``pressure``: the hourglass scene's pressure field (particles as placed) at
 3 ... 12 fluid cells per smallest diameter against a 16-cell reference, sampled at
@@ -13,11 +14,20 @@ overlap, against the analytic disk's ``kn * delta``, as the surface-node count a
 the level-set spacing vary, with and without the paper's node normalisation;
 error against the time of one contact step.
 
+``escapees``: the clogging statistics of the vani scene (mean escapees before a
+clog, censoring-aware, with its 95 % interval) as one knob at a time moves off its
+``auto`` value: the time step (``run.dt_safety``), the contact stiffness
+(``contact.overlap_target``), the fluid update interval and the fluid grid. Every
+point runs the same seeds. Plotted against the wall time per simulated
+realization-second. It is a sweep (``tools/sweep.py`` machinery): interrupted, it
+resumes without redoing finished points; the runs are in ``<out>/escapees/``.
+
 Outputs go to ``--out`` (default ``runs/convergence/``): ``<study>.csv`` and
 ``<study>.png``.
 """
 import argparse
 import csv
+import json
 import sys
 import time
 from pathlib import Path
@@ -145,14 +155,99 @@ def contact_study(out, quick):
     return rows, csv_path, png
 
 
+# The escapee study's knobs: (label, override key, values off the default). The
+# vani scene's auto values: dt_safety 0.15, overlap_target 0.02, update_interval
+# 164 steps (half a cell at the constriction's mean speed), cell_size d/6.
+D_VANI = 140e-6
+ESCAPEE_KNOBS = (
+    ("time step (dt_safety)", "run.dt_safety", (0.075, 0.3)),
+    ("contact stiffness (overlap_target)", "contact.overlap_target", (0.01, 0.04)),
+    ("fluid update interval (steps)", "fluid.update_interval", (82, 328, 656)),
+    ("fluid cells per d", "fluid.cell_size", (D_VANI / 8, D_VANI / 4)),
+)
+ESCAPEE_DEFAULTS = {"run.dt_safety": 0.15, "contact.overlap_target": 0.02,
+                    "fluid.update_interval": 164, "fluid.cell_size": D_VANI / 6}
+
+
+def _knob_value(key, value):
+    return round(D_VANI / value, 3) if key == "fluid.cell_size" else value
+
+
+def escapee_study(out, quick, realizations=None):
+    from taichi_hsdem.sweep import run_sweep
+    scene_path = ROOT / "scenes" / "vani_phi026.toml"
+    n = realizations or (2 if quick else 20)
+    common = {"run.realizations": n, "run.seed": 1000}
+    if quick:
+        common["run.t_end"] = 0.3
+    points = [{}] + [{key: v} for _, key, values in ESCAPEE_KNOBS for v in values]
+    sweep_rows = run_sweep(scene_path, points, out / ("escapees-quick" if quick else "escapees"),
+                           common=common, progress=lambda m: print(m, file=sys.stderr))
+    bad = [r for r in sweep_rows if r["status"] not in ("ran", "skipped", "unstable")]
+    if bad:
+        raise SystemExit(f"escapee study: points without results: "
+                         f"{[(r['folder'], r['status'], r['message']) for r in bad]}")
+    default = sweep_rows[0]
+    rows = []
+    for label, key, values in ESCAPEE_KNOBS:
+        for r in [default] + [sr for sr in sweep_rows[1:] if key in sr["overrides"]]:
+            value = r["overrides"].get(key, ESCAPEE_DEFAULTS[key])
+            summary = json.loads((out / ("escapees-quick" if quick else "escapees")
+                                  / r["folder"] / "summary.json").read_text())
+            sim_s = sum((x["t_stop"] or 0.0) for x in summary["realizations"])
+            lo, hi = r["mean_escapees_ci"]
+            rows.append([key, _knob_value(key, value), r["n_ok"], r["n_clogged"],
+                         r["n_unstable"], r["mean_escapees"], lo, hi, r["wall_time_s"],
+                         r["wall_time_s"] / sim_s if sim_s else float("nan")])
+    csv_path = _write(out, "escapees", [
+        "knob", "value", "realizations_ok", "clogged", "unstable", "mean_escapees",
+        "mean_escapees_ci_lo", "mean_escapees_ci_hi", "wall_s",
+        "wall_s_per_realization_s"], rows)
+    png = _escapee_chart(out, rows, n)
+    return rows, csv_path, png
+
+
+def _escapee_chart(out, rows, n):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for k, (label, key, _) in enumerate(ESCAPEE_KNOBS):
+        sel = sorted((r for r in rows if r[0] == key), key=lambda r: r[9])
+        xs = np.array([r[9] for r in sel]) * (1 + 0.02 * (k - 1.5))  # spread the default
+        ys = np.array([r[5] if r[5] is not None else np.nan for r in sel], dtype=float)
+        lo = np.array([r[6] if r[6] is not None else np.nan for r in sel], dtype=float)
+        hi = np.array([r[7] if r[7] is not None else np.nan for r in sel], dtype=float)
+        ax.errorbar(xs, ys, yerr=[ys - lo, hi - ys], fmt="o-", capsize=3, label=label)
+        for x, y, r in zip(xs, ys, sel):
+            tag = r[1] if r[1] != _knob_value(key, ESCAPEE_DEFAULTS[key]) else "auto"
+            ax.annotate(str(tag), (x, y), textcoords="offset points", xytext=(4, 4),
+                        fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xlabel("wall seconds per simulated realization-second")
+    ax.set_ylabel("mean escapees before a clog <s> (95 % interval)")
+    ax.set_title(f"vani scene, {n} realizations per point, one knob at a time", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "escapees.png", dpi=120)
+    plt.close(fig)
+    return out / "escapees.png"
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("study", choices=("pressure", "contact"))
+    p.add_argument("study", choices=("pressure", "contact", "escapees"))
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default=str(ROOT / "runs" / "convergence"))
+    p.add_argument("--realizations", type=int, default=None,
+                   help="escapees: realizations per point (default 20, --quick 2)")
     a = p.parse_args(argv)
-    study = {"pressure": pressure_study, "contact": contact_study}[a.study]
-    rows, csv_path, png = study(Path(a.out), a.quick)
+    if a.study == "escapees":
+        rows, csv_path, png = escapee_study(Path(a.out), a.quick, a.realizations)
+    else:
+        study = {"pressure": pressure_study, "contact": contact_study}[a.study]
+        rows, csv_path, png = study(Path(a.out), a.quick)
     for r in rows:
         print(", ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in r))
     print(f"wrote {csv_path} and {png}", file=sys.stderr)

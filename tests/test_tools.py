@@ -1,0 +1,41 @@
+"""The benchmark and study commands' argument handling (their runs are measured,
+not tested: see README, Benchmarks)."""
+import importlib.util
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load(name):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_bench_case_names_carry_overrides():
+    bench = _load("bench")
+    scene, ov = bench.overrides("disks-0.26-R10@fluid.workers=1@run.dt_safety=0.1", 0.02)
+    assert scene.name == "vani_phi026.toml"
+    assert ov[:3] == ["run.realizations=10", "run.t_end=0.02", "run.stop_at_clog=false"]
+    assert "particles.packing_fraction=0.26" in ov
+    assert ov[-2:] == ["fluid.workers=1", "run.dt_safety=0.1"]
+    scene, ov = bench.overrides("paper-squares-0.17-R1", 0.05)
+    assert scene.name == "squares.toml"
+    assert f"run.dt={bench.PAPER_DT}" in ov
+    assert f"fluid.update_interval={bench.PAPER_FLUID_EVERY}" in ov
+
+
+def test_escapee_study_moves_one_knob_at_a_time_off_the_scene_defaults():
+    conv = _load("convergence")
+    from taichi_hsdem import load_scene
+    from taichi_hsdem.resolve import resolve
+    model = resolve(load_scene(ROOT / "scenes" / "vani_phi026.toml"))
+    scene = model.scene
+    # The chart labels a point "auto" by these values: they must be the scene's.
+    assert conv.ESCAPEE_DEFAULTS["run.dt_safety"] == scene.run.dt_safety
+    assert conv.ESCAPEE_DEFAULTS["contact.overlap_target"] == scene.contact.overlap_target
+    assert conv.ESCAPEE_DEFAULTS["fluid.cell_size"] == \
+        __import__("pytest").approx(model.d_min / 6, rel=1e-12)
+    for _, key, values in conv.ESCAPEE_KNOBS:
+        assert conv.ESCAPEE_DEFAULTS[key] not in values
