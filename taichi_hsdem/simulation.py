@@ -371,7 +371,10 @@ class Simulation:
         t0 = time.perf_counter()
         pres, info = self.fluid.solve(
             kappa, carried=self.carried.to_numpy().astype(float) if flux else None,
-            occupied=(kappa < m.kappa_free) & m.fluid_active if flux else None)
+            # a free cell holds kappa_free in the kernels' precision (f32 rounds 0.12
+            # down to 0.1199999973, below the float64 value: compare like with like)
+            occupied=(kappa < float(self._npr(m.kappa_free))) & m.fluid_active
+            if flux else None)
         self.fluid_seconds += time.perf_counter() - t0
         self.fluid_solves += 1
         self._kappa_solved = kappa
