@@ -65,6 +65,9 @@ class Model:
     fluid_shape: tuple[int, int] | None = None
     fluid_active: np.ndarray | None = None
     fluid_workers: int = 1
+    # (N, 3) x, y, theta of the particles with given positions, NaN for the others
+    # (placed at random); None when no species gives positions
+    initial_poses: np.ndarray | None = None
     kappa_free: float = 0.0
     notes: dict[str, str] = field(default_factory=dict)
 
@@ -328,6 +331,7 @@ def resolve(scene: Scene) -> Model:
         s.ks = s.kn / 2.0 if sp.ks == "auto" else float(sp.ks)
         if sp.ks == "auto":
             values[f"particles.{k}.ks"] = s.ks
+    initial = _initial_poses(scene, geom, templates, bad)
     if problems:
         raise SceneError(problems)
 
@@ -353,6 +357,7 @@ def resolve(scene: Scene) -> Model:
                   feed_region=region, feed_inlet=(0.0, 0.0), kappa_free=kappa_free, notes=notes)
     if model.n_particles == 0:
         raise SceneError([f"{src}: particles: the scene has no particles (every count is 0)"])
+    model.initial_poses = initial
     inlet = scene.feed.inlet
     if inlet is None:
         inlet = (region[0], min(region[1], region[0] + 2.0 * d_max))
@@ -382,6 +387,30 @@ def resolve(scene: Scene) -> Model:
         model.fluid_workers = int(min(workers, scene.run.realizations))
     model.scene = scene.with_values(values)
     return model
+
+
+def _initial_poses(scene: Scene, geom, templates, bad):
+    """(N, 3) poses of the particles given by ``particles.positions`` (NaN rows for
+    the randomly placed ones), or None; wall and particle overlaps are refused."""
+    if all(sp.positions is None for sp in scene.particles):
+        return None
+    from .placement import check_initial
+    rows, given_species = [], []
+    for k, sp in enumerate(scene.particles):
+        if sp.positions is None:
+            rows += [(np.nan, np.nan, np.nan)] * int(sp.count or 0)
+        else:
+            rows += list(sp.positions)
+            given_species += [k] * len(sp.positions)
+    poses = np.array(rows, dtype=float).reshape(-1, 3)
+    given = np.isfinite(poses[:, 0])
+    names = [sp.name for sp in scene.particles]
+    problems = check_initial(geom, templates, poses[given, :2], poses[given, 2],
+                             given_species, names=names)
+    for line in problems:
+        bad("particles.positions", line + " (particles numbered from 0 in the order "
+            "their positions are given, species after species)")
+    return poses
 
 
 def pair_table(species: list[Species]) -> np.ndarray:

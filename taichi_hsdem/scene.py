@@ -78,7 +78,7 @@ class SceneError(ValueError):
 class _Spec:
     """What one scene key accepts."""
 
-    kind: str  # "float", "int", "bool", "str", "choice", "points", "polygons", "interval"
+    kind: str  # "float", "int", "bool", "str", "choice", "points", "poses", "polygons", "interval"
     doc: str
     required: bool = False
     auto: bool = False  # the string "auto" is accepted besides the kind
@@ -273,7 +273,11 @@ class SpeciesConfig(_Config):
         "points", "body-frame outline [x, y] (recentred on its centroid by the run), m",
         required=True, min_len=3, only=("polygon",))
     count: int | None = _key("int", "particles in the control volume (or "
-                             "packing_fraction)", ge=0)
+                             "packing_fraction, or positions)", ge=0)
+    positions: tuple[tuple[float, float, float], ...] | None = _key(
+        "poses", "initial [x, y] or [x, y, theta] of every particle of this species "
+        "(m, m, rad; theta 0 if left out), instead of a random placement; the same in "
+        "every realization, checked against the walls and each other", min_len=1)
     packing_fraction: float | None = _key("float", "areal fraction in the control "
                                           "volume (or count), dimensionless", gt=0,
                                           lt=MAX_PACKING_FRACTION)
@@ -654,6 +658,7 @@ def _expected(spec: _Spec) -> str:
     what = {"float": "a number", "int": "an integer", "bool": "true or false",
             "str": "a string", "choice": "one of " + ", ".join(map(repr, spec.choices)),
             "points": "an array of [x, y] pairs", "polygons": "an array of polygons",
+            "poses": "an array of [x, y] or [x, y, theta]",
             "interval": "[x0, x1]"}[spec.kind]
     limits = _range_text(spec)
     if limits:
@@ -680,6 +685,27 @@ def _coerce_points(value: Any, key: str, min_len: int, out: _Problems):
         out.add(key, f"needs at least {min_len} vertices, got {len(points)}")
         return _BAD
     return points
+
+
+def _coerce_poses(value: Any, key: str, min_len: int, out: _Problems):
+    if not isinstance(value, (list, tuple)):
+        out.add(key, f"expected an array of [x, y] or [x, y, theta], got {_describe(value)}")
+        return _BAD
+    poses = []
+    for i, p in enumerate(value):
+        if (isinstance(p, (list, tuple)) and len(p) in (2, 3)
+                and all(_is_real(c) and math.isfinite(c) for c in p)):
+            poses.append((float(p[0]), float(p[1]), float(p[2]) if len(p) == 3 else 0.0))
+        else:
+            out.add(f"{key}[{i}]", "expected [x, y] or [x, y, theta] with finite numbers, "
+                                   f"got {_describe(p)}")
+            poses.append(_BAD)
+    if _BAD in poses:
+        return _BAD
+    if len(poses) < min_len:
+        out.add(key, f"needs at least {min_len} entries, got {len(poses)}")
+        return _BAD
+    return tuple(poses)
 
 
 def _coerce(value: Any, spec: _Spec, key: str, out: _Problems) -> Any:
@@ -726,6 +752,8 @@ def _coerce(value: Any, spec: _Spec, key: str, out: _Problems) -> Any:
         return value
     if kind == "points":
         return _coerce_points(value, key, spec.min_len, out)
+    if kind == "poses":
+        return _coerce_poses(value, key, spec.min_len, out)
     if kind == "polygons":
         if not isinstance(value, (list, tuple)):
             out.add(key, f"expected an array of polygons, got {_describe(value)}")
@@ -904,7 +932,16 @@ def _check_species(v: dict, index: int, out: _Problems) -> tuple[float, int] | N
     where = f"particles[{index}]"
     if v["name"] is None:
         v["name"] = f"species{index}"
-    if v["count"] is None and v["packing_fraction"] is None:
+    if _good(v["positions"]) and v["positions"] is not None:
+        n = len(v["positions"])
+        if v["packing_fraction"] is not None:
+            out.add(f"{where}.packing_fraction", "positions are given too: give one of "
+                                                 "count, packing_fraction and positions")
+        elif v["count"] is not None and v["count"] != n:
+            out.add(f"{where}.count", f"{v['count']} differs from the {n} positions given")
+        else:
+            v["count"] = n
+    elif v["count"] is None and v["packing_fraction"] is None:
         out.add(f"{where}.count", "missing: give exactly one of count and "
                                   "packing_fraction")
     elif v["count"] is not None and v["packing_fraction"] is not None:

@@ -242,10 +242,21 @@ class Simulation:
         shapes = [s.shape for s in m.species]
         xs = np.zeros((self.R, self.N, 2))
         ths = np.zeros((self.R, self.N))
+        given = (np.zeros(self.N, dtype=bool) if m.initial_poses is None
+                 else np.isfinite(m.initial_poses[:, 0]))
+        existing = None
+        if given.any():  # the same in every realization; the others avoid them
+            xs[:, given] = m.initial_poses[given, :2]
+            ths[:, given] = m.initial_poses[given, 2]
+            existing = (m.initial_poses[given, :2], m.initial_poses[given, 2],
+                        [shapes[k] for k in m.species_of_particle[given]])
         for r in range(self.R):
+            if given.all():
+                break
             try:
-                xs[r], ths[r] = place(self.rngs[r], m.geometry, shapes, m.species_of_particle,
-                                      m.feed_region, gap=0.0)
+                xs[r, ~given], ths[r, ~given] = place(
+                    self.rngs[r], m.geometry, shapes, m.species_of_particle[~given],
+                    m.feed_region, gap=0.0, existing=existing)
             except PlacementError as exc:
                 raise SceneError([f"{self.scene.source}: particles: {exc}"]) from None
         self.set_state(xs, ths)
