@@ -675,6 +675,9 @@ class PressureSolver:
         if self._pool.generation != generation:  # pragma: no cover - map raises first
             raise solver_pool.PoolError("the worker pool was restarted during a solve")
         self._pattern_at.update((generation, w) for w in range(W))
+        if "local" in self._pattern_at:  # the solves have moved: free the copies here
+            solver_pool.forget(self._token)
+            self._pattern_at.discard("local")
         x = np.zeros((R, self._n))
         its, res = np.zeros(R, dtype=int), np.zeros(R)
         for rows, (xw, itw, rw, setup) in zip(owned, replies):

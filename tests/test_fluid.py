@@ -346,3 +346,5 @@ def test_workers_start_only_after_the_solves_took_pool_after_seconds():
         p2, _ = late.solve(kappas)
         np.testing.assert_array_equal(p1, p2)
     assert any(isinstance(where, tuple) for where in late._pattern_at)
+    # the in-process hierarchies were freed when the solves moved
+    assert not any(key[0] == late._token for key in solver_pool._CACHE)
