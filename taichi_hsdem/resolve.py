@@ -331,7 +331,7 @@ def resolve(scene: Scene) -> Model:
         s.ks = s.kn / 2.0 if sp.ks == "auto" else float(sp.ks)
         if sp.ks == "auto":
             values[f"particles.{k}.ks"] = s.ks
-    initial = _initial_poses(scene, geom, templates, bad)
+    initial = _initial_poses(scene, geom, templates, [s.count for s in species], bad)
     if problems:
         raise SceneError(problems)
 
@@ -354,10 +354,10 @@ def resolve(scene: Scene) -> Model:
                   species_of_particle=np.repeat(np.arange(len(species), dtype=np.int32),
                                                 [s.count for s in species]),
                   all_disks=all_disks, dt=dt, dt_crit=dt_crit, x_escape=x_escape,
-                  feed_region=region, feed_inlet=(0.0, 0.0), kappa_free=kappa_free, notes=notes)
+                  feed_region=region, feed_inlet=(0.0, 0.0), kappa_free=kappa_free,
+                  initial_poses=initial, notes=notes)
     if model.n_particles == 0:
         raise SceneError([f"{src}: particles: the scene has no particles (every count is 0)"])
-    model.initial_poses = initial
     inlet = scene.feed.inlet
     if inlet is None:
         inlet = (region[0], min(region[1], region[0] + 2.0 * d_max))
@@ -384,21 +384,22 @@ def resolve(scene: Scene) -> Model:
             notes["fluid.workers"] = (f"one process per usable CPU ({cpus}), at most one per "
                                       f"realization ({scene.run.realizations})")
             values["fluid.workers"] = workers
-        model.fluid_workers = int(min(workers, scene.run.realizations))
+        model.fluid_workers = int(workers)  # the solver uses at most one per realization
     model.scene = scene.with_values(values)
     return model
 
 
-def _initial_poses(scene: Scene, geom, templates, bad):
+def _initial_poses(scene: Scene, geom, templates, counts, bad):
     """(N, 3) poses of the particles given by ``particles.positions`` (NaN rows for
-    the randomly placed ones), or None; wall and particle overlaps are refused."""
+    the randomly placed ones, ``counts[k]`` of species k), or None; wall and particle
+    overlaps are refused."""
     if all(sp.positions is None for sp in scene.particles):
         return None
     from .placement import check_initial
     rows, given_species = [], []
     for k, sp in enumerate(scene.particles):
         if sp.positions is None:
-            rows += [(np.nan, np.nan, np.nan)] * int(sp.count or 0)
+            rows += [(np.nan, np.nan, np.nan)] * counts[k]
         else:
             rows += list(sp.positions)
             given_species += [k] * len(sp.positions)

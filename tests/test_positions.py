@@ -75,3 +75,15 @@ def test_positions_survive_the_resolved_scene_round_trip(tmp_path):
     again = load_scene(path)
     assert again.particles[0].positions == ((5.0, 5.0, 0.25), (7.0, 3.0, 0.0))
     assert read_toml(path)["particles"][0]["positions"][0] == [5.0, 5.0, 0.25]
+
+
+def test_given_positions_beside_a_species_placed_by_packing_fraction():
+    scene = _scene([[5.0, 5.0]])
+    random = {k: v for k, v in scene["particles"][0].items() if k != "positions"}
+    scene["particles"].append({**random, "name": "random", "packing_fraction": 0.1})
+    sim = Simulation(load_scene(scene))
+    n_random = sim.model.species[1].count
+    assert n_random > 0 and sim.N == 1 + n_random
+    st = sim.state()
+    np.testing.assert_array_equal(st["x"][:, 0], [[5.0, 5.0]] * 2)
+    assert np.linalg.norm(st["x"][:, 1:] - [5.0, 5.0], axis=-1).min() >= 1.0
