@@ -573,8 +573,12 @@ def _pmf_panel(ax, groups, title="PMF of s/<s>"):
     ax.legend(fontsize=7)
 
 
-def _footer(fig, meta):
+def _finish(plt, fig, path, meta):
+    """Footer line ``meta``, layout, write ``path``, free the figure."""
     fig.text(0.01, 0.005, meta, fontsize=6, color="0.4", ha="left", va="bottom")
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def plot_escapees_time(runs, rows, path: Path, meta: str):
@@ -628,10 +632,7 @@ def plot_escapees_time(runs, rows, path: Path, meta: str):
     a2.set_ylabel("escape rate (1/s)")
     a2.set_title("steady escape rate")
     a2.legend(fontsize=7)
-    _footer(fig, meta)
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _finish(plt, fig, path, meta)
 
 
 def plot_pmf_collapse(runs, rows, pmfs, path: Path, meta: str):
@@ -653,10 +654,7 @@ def plot_pmf_collapse(runs, rows, pmfs, path: Path, meta: str):
     a1.set_title("histogram of s (clogged realizations)")
     a1.legend(fontsize=7)
     _pmf_panel(a2, [(f"phi = {r.point.values['phi']:g}", pmfs[i]) for i, r in enumerate(runs)])
-    _footer(fig, meta)
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _finish(plt, fig, path, meta)
 
 
 def _mean_decay_panels(a1, a2, x, rows, xlabel, labels=None, xticks=None, series_label=None):
@@ -693,10 +691,7 @@ def plot_friction(runs, rows, path: Path, meta: str):
     _mean_decay_panels(a1, a2, [r["mu"] for r in rows], rows, "friction mu")
     a1.set_title(f"<s> vs friction at phi = {rows[0]['phi']:g} (95 % CI)")
     a2.set_title("decay rates (95 % CI)")
-    _footer(fig, meta)
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _finish(plt, fig, path, meta)
 
 
 def plot_shapes(runs, rows, pmfs, path: Path, meta: str):
@@ -717,10 +712,7 @@ def plot_shapes(runs, rows, pmfs, path: Path, meta: str):
     a1.legend(fontsize=7)
     a2.legend(fontsize=7)
     _pmf_panel(a3, [(r.point.label, pmfs[i]) for i, r in enumerate(runs)])
-    _footer(fig, meta)
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _finish(plt, fig, path, meta)
 
 
 def plot_polygons(runs, rows, pmfs, path: Path, meta: str):
@@ -735,10 +727,7 @@ def plot_polygons(runs, rows, pmfs, path: Path, meta: str):
     a1.set_title(f"<s> vs vertex count, W/d_b = {rows[0]['W_over_db']:g} (95 % CI)")
     a2.set_title("decay rates (95 % CI)")
     _pmf_panel(a3, [(r.point.label, pmfs[i]) for i, r in enumerate(runs)])
-    _footer(fig, meta)
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _finish(plt, fig, path, meta)
 
 
 def render(command: str, runs, rows, pmfs, path: Path, meta: str = ""):

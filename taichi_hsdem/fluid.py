@@ -671,9 +671,7 @@ class PressureSolver:
                 {r: self._data[r] for r in rows if r in fresh}, rhs[rows], guess[rows],
                 self.tol, MAXITER)))
             owned.append(rows)
-        replies = self._pool.map(calls)
-        if self._pool.generation != generation:  # pragma: no cover - map raises first
-            raise solver_pool.PoolError("the worker pool was restarted during a solve")
+        replies = self._pool.map(calls)  # raises PoolError if any worker failed
         self._pattern_at.update((generation, w) for w in range(W))
         if "local" in self._pattern_at:  # the solves have moved: free the copies here
             solver_pool.forget(self._token)

@@ -674,38 +674,33 @@ def _coerce_point(value: Any, key: str, out: _Problems):
     return _BAD
 
 
+def _coerce_pose(value: Any, key: str, out: _Problems):
+    if (isinstance(value, (list, tuple)) and len(value) in (2, 3)
+            and all(_is_real(c) and math.isfinite(c) for c in value)):
+        return (float(value[0]), float(value[1]),
+                float(value[2]) if len(value) == 3 else 0.0)
+    out.add(key, f"expected [x, y] or [x, y, theta] with finite numbers, got {_describe(value)}")
+    return _BAD
+
+
+def _coerce_array(value: Any, key: str, out: _Problems, item, what: str,
+                  min_len: int = 0, unit: str = "entries"):
+    """A tuple of ``item(entry, "key[i]", out)`` for an array ``value`` of at least
+    ``min_len`` entries, or _BAD after reporting why not."""
+    if not isinstance(value, (list, tuple)):
+        out.add(key, f"expected an array of {what}, got {_describe(value)}")
+        return _BAD
+    items = tuple(item(p, f"{key}[{i}]", out) for i, p in enumerate(value))
+    if _BAD in items:
+        return _BAD
+    if len(items) < min_len:
+        out.add(key, f"needs at least {min_len} {unit}, got {len(items)}")
+        return _BAD
+    return items
+
+
 def _coerce_points(value: Any, key: str, min_len: int, out: _Problems):
-    if not isinstance(value, (list, tuple)):
-        out.add(key, f"expected an array of [x, y] pairs, got {_describe(value)}")
-        return _BAD
-    points = tuple(_coerce_point(p, f"{key}[{i}]", out) for i, p in enumerate(value))
-    if _BAD in points:
-        return _BAD
-    if len(points) < min_len:
-        out.add(key, f"needs at least {min_len} vertices, got {len(points)}")
-        return _BAD
-    return points
-
-
-def _coerce_poses(value: Any, key: str, min_len: int, out: _Problems):
-    if not isinstance(value, (list, tuple)):
-        out.add(key, f"expected an array of [x, y] or [x, y, theta], got {_describe(value)}")
-        return _BAD
-    poses = []
-    for i, p in enumerate(value):
-        if (isinstance(p, (list, tuple)) and len(p) in (2, 3)
-                and all(_is_real(c) and math.isfinite(c) for c in p)):
-            poses.append((float(p[0]), float(p[1]), float(p[2]) if len(p) == 3 else 0.0))
-        else:
-            out.add(f"{key}[{i}]", "expected [x, y] or [x, y, theta] with finite numbers, "
-                                   f"got {_describe(p)}")
-            poses.append(_BAD)
-    if _BAD in poses:
-        return _BAD
-    if len(poses) < min_len:
-        out.add(key, f"needs at least {min_len} entries, got {len(poses)}")
-        return _BAD
-    return tuple(poses)
+    return _coerce_array(value, key, out, _coerce_point, "[x, y] pairs", min_len, "vertices")
 
 
 def _coerce(value: Any, spec: _Spec, key: str, out: _Problems) -> Any:
@@ -753,14 +748,11 @@ def _coerce(value: Any, spec: _Spec, key: str, out: _Problems) -> Any:
     if kind == "points":
         return _coerce_points(value, key, spec.min_len, out)
     if kind == "poses":
-        return _coerce_poses(value, key, spec.min_len, out)
+        return _coerce_array(value, key, out, _coerce_pose, "[x, y] or [x, y, theta]",
+                             spec.min_len)
     if kind == "polygons":
-        if not isinstance(value, (list, tuple)):
-            out.add(key, f"expected an array of polygons, got {_describe(value)}")
-            return _BAD
-        polygons = tuple(_coerce_points(p, f"{key}[{i}]", 3, out)
-                         for i, p in enumerate(value))
-        return _BAD if _BAD in polygons else polygons
+        return _coerce_array(value, key, out,
+                             lambda p, where, o: _coerce_points(p, where, 3, o), "polygons")
     # interval
     if (isinstance(value, (list, tuple)) and len(value) == 2
             and all(_is_real(c) and math.isfinite(c) for c in value)):
@@ -932,7 +924,7 @@ def _check_species(v: dict, index: int, out: _Problems) -> tuple[float, int] | N
     where = f"particles[{index}]"
     if v["name"] is None:
         v["name"] = f"species{index}"
-    if _good(v["positions"]) and v["positions"] is not None:
+    if _good(v["positions"]):
         n = len(v["positions"])
         if v["packing_fraction"] is not None:
             out.add(f"{where}.packing_fraction", "positions are given too: give one of "

@@ -250,12 +250,11 @@ class Simulation:
             ths[:, given] = m.initial_poses[given, 2]
             existing = (m.initial_poses[given, :2], m.initial_poses[given, 2],
                         [shapes[k] for k in m.species_of_particle[given]])
-        for r in range(self.R):
-            if given.all():
-                break
+        random = np.flatnonzero(~given)
+        for r in range(self.R if random.size else 0):
             try:
-                xs[r, ~given], ths[r, ~given] = place(
-                    self.rngs[r], m.geometry, shapes, m.species_of_particle[~given],
+                xs[r, random], ths[r, random] = place(
+                    self.rngs[r], m.geometry, shapes, m.species_of_particle[random],
                     m.feed_region, gap=0.0, existing=existing)
             except PlacementError as exc:
                 raise SceneError([f"{self.scene.source}: particles: {exc}"]) from None

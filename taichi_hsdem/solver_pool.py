@@ -194,7 +194,8 @@ class Pool:
             raise
 
     def forget(self, token):
-        """Tell every running worker to drop ``token``'s hierarchies (no reply wait)."""
+        """Tell every running worker to drop ``token``'s hierarchies; a failure only
+        stops the workers (what they held is gone either way)."""
         try:
             self.map([("forget", (token,))] * len(self.workers))
         except PoolError:

@@ -95,16 +95,25 @@ def assert_no_stray_files(folder):
 
 # ------------------------------------------------------------------ hourglass24
 
-@pytest.fixture(scope="module")
-def hourglass_run(tmp_path_factory):
+def video_run(tmp_path_factory, name, scene, *args, scene_text=None):
+    """Run ``scene`` with ``--video`` from an empty working folder; return (work,
+    out, completed process). With ``scene_text`` the scene file is written first."""
     needs_vulkan()
-    base = tmp_path_factory.mktemp("hourglass")
+    base = tmp_path_factory.mktemp(name)
     work, out = base / "work", base / "out"
     work.mkdir()
-    proc = run_cli(HOURGLASS, out, work, "--video", "--set", "run.t_end=10",
-                   "--set", "output.frames=25")
+    if scene_text is not None:
+        scene = base / scene
+        scene.write_text(scene_text)
+    proc = run_cli(scene, out, work, "--video", *args)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return work, out, proc
+
+
+@pytest.fixture(scope="module")
+def hourglass_run(tmp_path_factory):
+    return video_run(tmp_path_factory, "hourglass", HOURGLASS, "--set", "run.t_end=10",
+                     "--set", "output.frames=25")
 
 
 def test_hourglass_video_is_h264_yuv420p_with_the_scene_frames(hourglass_run):
@@ -207,15 +216,7 @@ width = 1920
 
 @pytest.fixture(scope="module")
 def squares_run(tmp_path_factory):
-    needs_vulkan()
-    base = tmp_path_factory.mktemp("squares")
-    work, out = base / "work", base / "out"
-    work.mkdir()
-    scene = base / "squares10.toml"
-    scene.write_text(SQUARES)
-    proc = run_cli(scene, out, work, "--video")
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return work, out, proc
+    return video_run(tmp_path_factory, "squares", "squares10.toml", scene_text=SQUARES)
 
 
 def test_squares_are_drawn_turned_by_their_theta(squares_run):

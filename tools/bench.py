@@ -95,7 +95,7 @@ def run_case(case, arch, precision, sim_time):
     ov += [f'run.arch="{arch}"', f'run.precision="{precision}"']
     sim = Simulation(load_scene(scene_path, ov))
     if sim.fluid is not None:
-        sim._update_fluid(force=True)  # run()'s first solve: starts the solver processes
+        sim._update_fluid(force=True)  # run()'s first solve (it sets the update interval)
     sim.step(5)                      # compile every kernel before timing
     solves0, fluid_s0, steps0 = sim.fluid_solves, sim.fluid_seconds, sim.steps
     samples = []                     # (simulated time, resident MB): flat over the run?
