@@ -321,60 +321,77 @@ def disk_contacts(x: ti.types.ndarray(), v: ti.types.ndarray(), w: ti.types.ndar
     history; the two copies stay exact mirrors because every operation is
     antisymmetric in (i, j).
     """
-    n_part = x.shape[1]
-    dt = prm[P_DT]
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
         if running[r] == 0 or alive[r, i] == 0:
             continue
-        for s in ti.static(range(slots)):
-            hp_new[r, i, 0, s] = 0
-        xi = x[r, i]
-        vi = v[r, i]
-        wi = w[r, i]
-        ri = rad[i]
-        ftot = vec2(0.0, 0.0)
-        mtot = 0.0
-        deepest = 0.0
-        for q in range(nbr_n[r, i]):
-            j = nbr[r, i, q]
-            if alive[r, j] == 0:
-                continue
-            d = xi - x[r, j]
-            dist = d.norm()
-            depth = ri + rad[j] - dist
-            if depth > 0.0 and dist > 0.0:
-                nrm = d / dist
-                a, b = sp[i], sp[j]
-                kn = pair[a, b, PAIR_KN]
-                meff = mass[i] * mass[j] / (mass[i] + mass[j])
-                gamma = pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
-                # contact point half-way through the overlap
-                ra = -(ri - 0.5 * depth) * nrm
-                rb = (rad[j] - 0.5 * depth) * nrm
-                u = (vi + spin(wi, ra)) - (v[r, j] + spin(w[r, j], rb))
-                fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, j)
-                fn, fs = contact_law(depth, nrm, u, fs_old, kn, pair[a, b, PAIR_KS],
-                                     pair[a, b, PAIR_MU], gamma, dt)
-                store_shear(hp_new, hs_new, r, i, 0, slots, j, fs, flags)
-                ftot += fn + fs
-                mtot += cross(ra, fs)
-                deepest = ti.max(deepest, depth / (2.0 * ri))
-        phi, g = wall_depth(wall, wall_grad, wall_meta, prm, xi)
-        depth = ri - phi
-        if depth > 0.0 and g.norm() > 0.0:
-            nrm = g.normalized()
-            a = sp[i]
-            kn = wallp[a, PAIR_KN]
-            gamma = wallp[a, PAIR_CE] * ti.sqrt(kn * mass[i])
-            ra = -(ri - 0.5 * depth) * nrm
-            u = vi + spin(wi, ra)
-            fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, n_part)
-            fn, fs = contact_law(depth, nrm, u, fs_old, kn, wallp[a, PAIR_KS],
-                                 wallp[a, PAIR_MU], gamma, dt)
-            store_shear(hp_new, hs_new, r, i, 0, slots, n_part, fs, flags)
-            ftot += fn + fs
-            mtot += cross(ra, fs)
-            deepest = ti.max(deepest, depth / (2.0 * ri))
+        ftot, mtot, deepest = disk_force(x, v, w, alive, nbr, nbr_n, sp, rad, mass, pair,
+                                         wallp, wall, wall_grad, wall_meta, hp_old, hs_old,
+                                         hp_new, hs_new, prm, flags, slots, r, i)
         f[r, i] += ftot
         tau[r, i] += mtot
         ti.atomic_max(max_overlap[r], deepest)
+
+
+@ti.func
+def disk_force(x: ti.template(), v: ti.template(), w: ti.template(), alive: ti.template(),
+               nbr: ti.template(), nbr_n: ti.template(), sp: ti.template(),
+               rad: ti.template(), mass: ti.template(), pair: ti.template(),
+               wallp: ti.template(), wall: ti.template(), wall_grad: ti.template(),
+               wall_meta: ti.template(), hp_old: ti.template(), hs_old: ti.template(),
+               hp_new: ti.template(), hs_new: ti.template(), prm: ti.template(),
+               flags: ti.template(), slots: ti.template(), r, i):
+    """Contact force, moment and deepest overlap (fraction of d) on disk ``i`` of
+    realization ``r`` from its listed neighbours and the walls; writes its new
+    shear history."""
+    n_part = x.shape[1]
+    dt = prm[P_DT]
+    for s in ti.static(range(slots)):
+        hp_new[r, i, 0, s] = 0
+    xi = x[r, i]
+    vi = v[r, i]
+    wi = w[r, i]
+    ri = rad[i]
+    ftot = vec2(0.0, 0.0)
+    mtot = 0.0
+    deepest = 0.0
+    for q in range(nbr_n[r, i]):
+        j = nbr[r, i, q]
+        if alive[r, j] == 0:
+            continue
+        d = xi - x[r, j]
+        dist = d.norm()
+        depth = ri + rad[j] - dist
+        if depth > 0.0 and dist > 0.0:
+            nrm = d / dist
+            a, b = sp[i], sp[j]
+            kn = pair[a, b, PAIR_KN]
+            meff = mass[i] * mass[j] / (mass[i] + mass[j])
+            gamma = pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
+            # contact point half-way through the overlap
+            ra = -(ri - 0.5 * depth) * nrm
+            rb = (rad[j] - 0.5 * depth) * nrm
+            u = (vi + spin(wi, ra)) - (v[r, j] + spin(w[r, j], rb))
+            fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, j)
+            fn, fs = contact_law(depth, nrm, u, fs_old, kn, pair[a, b, PAIR_KS],
+                                 pair[a, b, PAIR_MU], gamma, dt)
+            store_shear(hp_new, hs_new, r, i, 0, slots, j, fs, flags)
+            ftot += fn + fs
+            mtot += cross(ra, fs)
+            deepest = ti.max(deepest, depth / (2.0 * ri))
+    phi, g = wall_depth(wall, wall_grad, wall_meta, prm, xi)
+    depth = ri - phi
+    if depth > 0.0 and g.norm() > 0.0:
+        nrm = g.normalized()
+        a = sp[i]
+        kn = wallp[a, PAIR_KN]
+        gamma = wallp[a, PAIR_CE] * ti.sqrt(kn * mass[i])
+        ra = -(ri - 0.5 * depth) * nrm
+        u = vi + spin(wi, ra)
+        fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, n_part)
+        fn, fs = contact_law(depth, nrm, u, fs_old, kn, wallp[a, PAIR_KS],
+                             wallp[a, PAIR_MU], gamma, dt)
+        store_shear(hp_new, hs_new, r, i, 0, slots, n_part, fs, flags)
+        ftot += fn + fs
+        mtot += cross(ra, fs)
+        deepest = ti.max(deepest, depth / (2.0 * ri))
+    return ftot, mtot, deepest

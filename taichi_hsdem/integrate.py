@@ -31,28 +31,40 @@ def advance(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray()
             deq: ti.types.ndarray(), xi: ti.types.ndarray(), x_ref: ti.types.ndarray(),
             prm: ti.types.ndarray(), bad: ti.types.ndarray(), escaped: ti.types.ndarray(),
             flags: ti.types.ndarray()):
-    dt = prm[I_DT]
-    half_skin = 0.5 * prm[I_SKIN]
-    x_escape = prm[I_XESC]
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
         if running[r] == 0 or alive[r, i] == 0:
             continue
-        damp = xi[sp[i]] * dt * 0.5
-        vn = ((1.0 - damp) * v[r, i] + dt * (f[r, i] + f_ext[r, i]) / mass[i]) / (1.0 + damp)
-        wn = ((1.0 - damp) * w[r, i] + dt * (tau[r, i] + tau_ext[r, i]) / inertia[i]) / (1.0 + damp)
-        xn = x[r, i] + dt * vn
-        v[r, i] = vn
-        w[r, i] = wn
-        x[r, i] = xn
-        th[r, i] += dt * wn
-        if not (ti.math.isinf(xn).any() or ti.math.isnan(xn).any()
-                or ti.math.isnan(wn) or ti.math.isinf(wn)):
-            if vn.norm() * dt > 0.25 * deq[i]:
-                ti.atomic_or(bad[r], BAD_FAST)
-        else:
-            ti.atomic_or(bad[r], BAD_NAN)
-        if (xn - x_ref[r, i]).norm() > half_skin:
+        if advance_body(x, th, v, w, f, tau, f_ext, tau_ext, alive, sp, mass, inertia, deq,
+                        xi, x_ref, prm, bad, escaped, r, i):
             flags[F_REBUILD] = 1
-        if xn.x > x_escape:
-            alive[r, i] = 0
-            escaped[r] += 1
+
+
+@ti.func
+def advance_body(x: ti.template(), th: ti.template(), v: ti.template(), w: ti.template(),
+                 f: ti.template(), tau: ti.template(), f_ext: ti.template(),
+                 tau_ext: ti.template(), alive: ti.template(), sp: ti.template(),
+                 mass: ti.template(), inertia: ti.template(), deq: ti.template(),
+                 xi: ti.template(), x_ref: ti.template(), prm: ti.template(),
+                 bad: ti.template(), escaped: ti.template(), r, i):
+    """One step of body ``i`` of realization ``r``; True when it has moved half the
+    Verlet skin since the last neighbour build."""
+    dt = prm[I_DT]
+    damp = xi[sp[i]] * dt * 0.5
+    vn = ((1.0 - damp) * v[r, i] + dt * (f[r, i] + f_ext[r, i]) / mass[i]) / (1.0 + damp)
+    wn = ((1.0 - damp) * w[r, i] + dt * (tau[r, i] + tau_ext[r, i]) / inertia[i]) / (1.0 + damp)
+    xn = x[r, i] + dt * vn
+    v[r, i] = vn
+    w[r, i] = wn
+    x[r, i] = xn
+    th[r, i] += dt * wn
+    if not (ti.math.isinf(xn).any() or ti.math.isnan(xn).any()
+            or ti.math.isnan(wn) or ti.math.isinf(wn)):
+        if vn.norm() * dt > 0.25 * deq[i]:
+            ti.atomic_or(bad[r], BAD_FAST)
+    else:
+        ti.atomic_or(bad[r], BAD_NAN)
+    moved = (xn - x_ref[r, i]).norm() > 0.5 * prm[I_SKIN]
+    if xn.x > prm[I_XESC]:
+        alive[r, i] = 0
+        escaped[r] += 1
+    return moved

@@ -27,22 +27,37 @@ G_OX, G_OY, G_CS, G_SKIN = 0, 1, 2, 3
 def bin_particles(x: ti.types.ndarray(), alive: ti.types.ndarray(), running: ti.types.ndarray(),
                   cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
                   grid: ti.types.ndarray(), ncx: ti.i32, ncy: ti.i32, flags: ti.types.ndarray()):
-    cap = cell_p.shape[2]
     for r in range(x.shape[0]):
-        for c in range(ncx * ncy):
-            cell_n[r, c] = 0
-        if running[r] != 0:
-            for i in range(x.shape[1]):
-                if alive[r, i] != 0:
-                    cx = ti.min(ti.max(ti.cast(ti.floor((x[r, i].x - grid[G_OX]) / grid[G_CS]), ti.i32), 0), ncx - 1)
-                    cy = ti.min(ti.max(ti.cast(ti.floor((x[r, i].y - grid[G_OY]) / grid[G_CS]), ti.i32), 0), ncy - 1)
-                    c = cx * ncy + cy
-                    slot = cell_n[r, c]
-                    if slot < cap:
-                        cell_p[r, c, slot] = i
-                    else:
-                        flags[F_CELL_OVERFLOW] = 1
-                    cell_n[r, c] = slot + 1
+        bin_one(x, alive, running, cell_n, cell_p, grid, ncx, ncy, flags, r)
+
+
+@ti.func
+def cell_of(grid: ti.template(), ncx, ncy, p):
+    """Cell (clamped to the grid) holding world point ``p``."""
+    cx = ti.min(ti.max(ti.cast(ti.floor((p.x - grid[G_OX]) / grid[G_CS]), ti.i32), 0), ncx - 1)
+    cy = ti.min(ti.max(ti.cast(ti.floor((p.y - grid[G_OY]) / grid[G_CS]), ti.i32), 0), ncy - 1)
+    return cx, cy
+
+
+@ti.func
+def bin_one(x: ti.template(), alive: ti.template(), running: ti.template(),
+            cell_n: ti.template(), cell_p: ti.template(), grid: ti.template(), ncx, ncy,
+            flags: ti.template(), r):
+    """Bin the live bodies of realization ``r``, serially (a reproducible order)."""
+    cap = cell_p.shape[2]
+    for c in range(ncx * ncy):
+        cell_n[r, c] = 0
+    if running[r] != 0:
+        for i in range(x.shape[1]):
+            if alive[r, i] != 0:
+                cx, cy = cell_of(grid, ncx, ncy, x[r, i])
+                c = cx * ncy + cy
+                slot = cell_n[r, c]
+                if slot < cap:
+                    cell_p[r, c, slot] = i
+                else:
+                    flags[F_CELL_OVERFLOW] = 1
+                cell_n[r, c] = slot + 1
 
 
 @ti.kernel
@@ -51,18 +66,27 @@ def build_neighbors(x: ti.types.ndarray(), x_ref: ti.types.ndarray(), alive: ti.
                     cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
                     nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
                     grid: ti.types.ndarray(), ncx: ti.i32, ncy: ti.i32, flags: ti.types.ndarray()):
+    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
+        list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n, grid, ncx, ncy,
+                 flags, r, i)  # (the count is for the fused stepper)
+
+
+@ti.func
+def list_one(x: ti.template(), x_ref: ti.template(), alive: ti.template(),
+             running: ti.template(), rb: ti.template(), cell_n: ti.template(),
+             cell_p: ti.template(), nbr: ti.template(), nbr_n: ti.template(),
+             grid: ti.template(), ncx, ncy, flags: ti.template(), r, i):
+    """Neighbour list of body ``i`` of realization ``r`` from the binned cells;
+    returns how many neighbours it found (more than the capacity: overflow)."""
     cap = nbr.shape[2]
     ccap = cell_p.shape[2]
     skin = grid[G_SKIN]
-    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
-        nbr_n[r, i] = 0
-        x_ref[r, i] = x[r, i]
-        if running[r] == 0 or alive[r, i] == 0:
-            continue
+    nbr_n[r, i] = 0
+    x_ref[r, i] = x[r, i]
+    count = 0
+    if running[r] != 0 and alive[r, i] != 0:
         xi = x[r, i]
-        cx = ti.min(ti.max(ti.cast(ti.floor((xi.x - grid[G_OX]) / grid[G_CS]), ti.i32), 0), ncx - 1)
-        cy = ti.min(ti.max(ti.cast(ti.floor((xi.y - grid[G_OY]) / grid[G_CS]), ti.i32), 0), ncy - 1)
-        count = 0
+        cx, cy = cell_of(grid, ncx, ncy, xi)
         for dx, dy in ti.ndrange((-1, 2), (-1, 2)):
             ax = cx + dx
             ay = cy + dy
@@ -84,6 +108,7 @@ def build_neighbors(x: ti.types.ndarray(), x_ref: ti.types.ndarray(), alive: ti.
                             flags[F_NBR_OVERFLOW] = 1
                         count += 1
         nbr_n[r, i] = ti.min(count, cap)
+    return count
 
 
 class NeighborList:

@@ -146,6 +146,10 @@ class RunConfig(_Config):
                      choices=("cpu", "gpu", "auto"))
     precision: str = _key("choice", "floating point type of the kernels", "f64",
                           choices=("f64", "f32"))
+    stepping: str = _key("choice", '"fused": many DEM steps per kernel launch, one '
+                         'realization per thread (disks only); "per_step": three launches '
+                         'per step, bodies in parallel; "auto": fused for disks on the CPU',
+                         AUTO, choices=("auto", "fused", "per_step"))
     stop_at_clog: bool = _key("bool", "stop a realization once it has clogged", True)
     force_dt: bool = _key("bool", "accept a dt above the critical step (stability "
                           "studies); the run is then watched and reported unstable", False)

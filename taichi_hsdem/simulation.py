@@ -3,7 +3,7 @@
 The host orchestrates; kernels do the per-body work. Per DEM step: fluid pressure
 forces (or a clear), contact forces, integration; the host reads one small flag
 array to know whether the neighbour list needs a rebuild. Every
-``check_interval`` steps it reads escapes, stability flags and speeds, feeds the
+``check_every`` steps it reads escapes, stability flags and speeds, feeds the
 inlet, looks for clogs and samples the time series; every
 ``fluid.update_interval`` steps it re-rasterises the permeability and re-solves
 the pressure.
@@ -33,7 +33,9 @@ from .placement import PlacementError, find_free_spot, place
 from .resolve import Model, pair_table, resolve, wall_table
 from .scene import Scene, SceneError
 
-CHECK_INTERVAL = 100          # steps between host-side checks
+CHECK_INTERVAL = 100          # steps between host-side checks, at least
+CHECK_TRAVEL = 0.05           # with fluid: d_min a particle at the constriction's mean
+                              # speed may move between checks (sets a longer interval)
 LS_HISTORY_SLOTS = 3          # contacts one surface node can remember at once
 DISK_HISTORY_SLOTS = 8        # contacts one disk can remember at once
 SKIN_FRACTION = 0.25          # Verlet skin as a fraction of the smallest d_eq
@@ -200,6 +202,12 @@ class Simulation:
         self.fluid = None
         self._forces_every_step = (self.scene.fluid.enabled
                                    and self.scene.fluid.force_update == "step")
+        self._fused = self._choose_stepping()
+        self.check_every = CHECK_INTERVAL       # longer with fluid (_resolve_update_interval)
+        if self._fused:
+            self.done = ti.ndarray(ti.i32, shape=R)
+            self.builds = ti.ndarray(ti.i32, shape=R)
+            self.builds.fill(0)
         self.fluid_solves = 0
         self.fluid_updates = 0
         self.fluid_seconds = 0.0
@@ -302,8 +310,82 @@ class Simulation:
         return self.f.to_numpy().astype(float), self.tau.to_numpy().astype(float)
 
     # ------------------------------------------------------------------ stepping
+    def _choose_stepping(self) -> bool:
+        """Resolve ``run.stepping``; True for the fused stepper (``fused.py``)."""
+        m, sc = self.model, self.scene
+        given = sc.run.stepping
+        blockers = []
+        if not m.all_disks:
+            blockers.append("the particles are not all disks on the analytic path")
+        if self._forces_every_step:
+            blockers.append('fluid.force_update = "step" re-evaluates the fluid force '
+                            "every step")
+        if given == "fused" and blockers:
+            raise SceneError([f"{sc.source}: run.stepping = \"fused\" is not available: "
+                              + "; ".join(blockers) + ' (use "auto" or "per_step")'])
+        if given == "auto":
+            cpu = self.arch not in ("cuda", "vulkan", "metal", "opengl", "dx11", "dx12")
+            fused = cpu and not blockers
+            if fused:
+                why = ("disks with held fluid forces on the CPU: many steps per kernel "
+                       "launch, one realization per thread")
+            elif blockers:
+                why = "per_step: " + "; ".join(blockers)
+            else:
+                why = (f"per_step on {self.arch}: one realization per thread would leave "
+                       "a GPU idle")
+            self.scene = self.scene.with_values({"run.stepping": "fused" if fused
+                                                 else "per_step"})
+            m.scene = self.scene
+            m.notes["run.stepping"] = why
+            return fused
+        return given == "fused"
+
     def step(self, n: int = 1):
         """Advance every running realization by ``n`` DEM steps (no host checks)."""
+        if self._fused:
+            self._step_fused(n)
+        else:
+            self._step_per_body(n)
+        for _ in range(n):
+            self.t += self.dt
+        self.steps += n
+
+    def _step_fused(self, n: int):
+        """``n`` steps in one launch; realizations whose neighbour rebuild overflowed
+        stop early and catch up once the host has grown the capacities."""
+        self._fused_launch(n)
+        running = self.running.to_numpy()
+        remaining = np.where((running != 0) & (self.bad.to_numpy() == 0),
+                             n - self.done.to_numpy(), 0)
+        while remaining.any():
+            self._rebuild()                       # grows what overflowed
+            lag = remaining > 0
+            k = int(remaining[lag].min())
+            self.running.from_numpy(np.where(lag, running, 0).astype(np.int32))
+            try:
+                self._fused_launch(k)
+            finally:
+                self.running.from_numpy(running)
+            remaining = np.where(lag & (self.bad.to_numpy() == 0),
+                                 remaining - self.done.to_numpy(), 0)
+
+    def _fused_launch(self, k: int):
+        from . import fused
+        (hp_a, hs_a), (hp_b, hs_b) = self.hist
+        nl = self.nlist
+        fused.disk_steps(k, self.x, self.th, self.v, self.w, self.f, self.tau, self.f_fluid,
+                         self.tau_fluid, self.f_ext, self.tau_ext, self.alive, self.running,
+                         self.sp, self.rad, self.mass, self.inertia, self.deq, self.xi,
+                         self.pair, self.wallp, self.wall, self.wall_grad, self.wall_meta,
+                         hp_a, hs_a, hp_b, hs_b, self.prm, self.iprm, self.max_overlap,
+                         self.flags, self.bad, self.escaped, nl.x_ref, self.rb, nl.cell_n,
+                         nl.cell_p, nl.nbr, nl.nbr_n, nl.grid, nl.ncx, nl.ncy, self.done,
+                         self.builds, self.slots)
+        if k % 2:
+            self.hist.reverse()   # every realization's latest history is now hist[0]
+
+    def _step_per_body(self, n: int):
         from . import contact, coupling, integrate
         from .neighbors import F_REBUILD
         m = self.model
@@ -332,8 +414,6 @@ class Simulation:
                               self.tau_ext, self.alive,
                               self.running, self.sp, self.mass, self.inertia, self.deq, self.xi,
                               self.nlist.x_ref, self.iprm, self.bad, self.escaped, self.flags)
-            self.t += self.dt
-            self.steps += 1
             if self.flags[F_REBUILD]:
                 self._rebuild()
 
@@ -412,6 +492,16 @@ class Simulation:
         """``fluid.update_interval = "auto"``: the fastest expected particle (the mean
         fluid speed through the constriction) crosses half a fluid cell between solves."""
         u = self._open_channel_speed()
+        if u > 0:
+            # Checks (escapes, feed, clogs, stability) as often as a particle at the
+            # constriction's mean speed moves CHECK_TRAVEL d; the paper's small time
+            # step would otherwise check every 4e-5 s, far finer than anything changes.
+            travel = CHECK_TRAVEL * self.model.d_min / (u * self.dt)
+            self.check_every = max(CHECK_INTERVAL, int(travel))
+            self.model.notes["run.check_every"] = (
+                f"{self.check_every} steps: a particle at the mean constriction speed "
+                f"{u:.4g} moves at most {CHECK_TRAVEL:g} d between checks "
+                f"(and at least {CHECK_INTERVAL} steps)")
         given = self.scene.fluid.update_interval
         if given != "auto":
             travel = given * self.dt * u
@@ -433,7 +523,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ checks
     def _check(self):
-        """Host-side checks every CHECK_INTERVAL steps; returns True while anything runs."""
+        """Host-side checks every ``check_every`` steps; returns True while anything runs."""
         m = self.model
         sc = self.scene
         from .neighbors import F_HISTORY_OVERFLOW
@@ -595,7 +685,7 @@ class Simulation:
                 next_series += series_dt
             if not running or self.t >= t_end - 0.5 * self.dt:
                 break
-            n = min(CHECK_INTERVAL, int(math.ceil((t_end - self.t) / self.dt - 0.5)))
+            n = min(self.check_every, int(math.ceil((t_end - self.t) / self.dt - 0.5)))
             if fluid_every is not None:
                 n = min(n, fluid_every - self.steps % fluid_every)
             if frames:
@@ -647,7 +737,8 @@ class Simulation:
                 "updates": self.fluid_updates, "solves": self.fluid_solves,
                 "solve_seconds": self.fluid_seconds,
                 "grid": list(self.model.fluid_shape), "cell_size": self.model.fluid_dx},
-            "neighbor_builds": self.nlist.builds,
+            "neighbor_builds": self.nlist.builds + (int(self.builds.to_numpy().sum())
+                                                    if self._fused else 0),
             "history_overflows": self.history_overflows,
             "contact_path": "disk" if self.model.all_disks else "level-set",
             "auto": dict(self.model.notes),

@@ -15,7 +15,6 @@ from conftest import make_sim
 from taichi_hsdem import Simulation, load_scene
 from taichi_hsdem import shapes as shp
 from taichi_hsdem.coupling import boundary_vectors
-from taichi_hsdem.simulation import CHECK_INTERVAL
 
 GAP = 1.2           # H
 ETA = 1.0           # viscosity
@@ -443,7 +442,7 @@ def run_escapes(phi, t_end, realizations, t_skip=2.0, seed=0, particle_flux=True
         s = series[(series[:, 0] == r) & (series[:, 1] >= t_skip - 1e-9)]
         escapes += s[-1, 2] - s[0, 2]
         span += s[-1, 1] - s[0, 1]
-    chunk = min(CHECK_INTERVAL, int(sim.scene.fluid.update_interval))
+    chunk = min(sim.check_every, int(sim.scene.fluid.update_interval))
     return {"rate": escapes / span, "escapes": escapes, "v": float(np.mean(speeds)),
             "N": sim.N, "alive": np.array(alive_counts), "park": 0.5 * chunk * sim.dt,
             "series": series, "sim": sim}

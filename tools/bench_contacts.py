@@ -143,8 +143,10 @@ def make_scene(case: str, n: int, arch: str, precision: str, packing: float = PA
     scene = {
         "name": f"bench-{case}-{n}",
         "units": "dimensionless",
+        # per_step: bodies in parallel, and every neighbour list built on the host,
+        # where EvalCounter sees it (the fused stepper rebuilds inside its kernel)
         "run": {"t_end": 1.0, "dt": "auto", "dt_safety": DT_SAFETY, "realizations": 1,
-                "arch": arch, "precision": precision},
+                "arch": arch, "precision": precision, "stepping": "per_step"},
         "fluid": {"enabled": False, "gap": 1.0},
         "geometry": {
             "kind": "polygon",

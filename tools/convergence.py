@@ -167,6 +167,10 @@ ESCAPEE_KNOBS = (
 )
 ESCAPEE_DEFAULTS = {"run.dt_safety": 0.15, "contact.overlap_target": 0.02,
                     "fluid.update_interval": 164, "fluid.cell_size": D_VANI / 6}
+# The paper's settings (Zhou et al.: a time step of 3.75e-7 s and a pressure solve
+# every 1e4 steps) on the same scene and seeds, for the speed-up of the auto
+# defaults and the change in <s> between the two.
+PAPER_POINT = {"run.dt": 3.75e-7, "fluid.update_interval": 10000}
 
 
 def _knob_value(key, value):
@@ -180,31 +184,64 @@ def escapee_study(out, quick, realizations=None):
     common = {"run.realizations": n, "run.seed": 1000}
     if quick:
         common["run.t_end"] = 0.3
-    points = [{}] + [{key: v} for _, key, values in ESCAPEE_KNOBS for v in values]
-    sweep_rows = run_sweep(scene_path, points, out / ("escapees-quick" if quick else "escapees"),
+    # the default and the paper-like point first: they are the comparison
+    points = [{}, PAPER_POINT] + [{key: v} for _, key, values in ESCAPEE_KNOBS for v in values]
+    folder = out / ("escapees-quick" if quick else "escapees")
+    sweep_rows = run_sweep(scene_path, points, folder,
                            common=common, progress=lambda m: print(m, file=sys.stderr))
     bad = [r for r in sweep_rows if r["status"] not in ("ran", "skipped", "unstable")]
     if bad:
         raise SystemExit(f"escapee study: points without results: "
                          f"{[(r['folder'], r['status'], r['message']) for r in bad]}")
-    default = sweep_rows[0]
+    default, paper = sweep_rows[0], sweep_rows[1]
+
+    def row(key, value, r):
+        summary = json.loads((folder / r["folder"] / "summary.json").read_text())
+        sim_s = sum((x["t_stop"] or 0.0) for x in summary["realizations"])
+        lo, hi = r["mean_escapees_ci"]
+        return [key, value, r["n_ok"], r["n_clogged"], r["n_unstable"], r["mean_escapees"],
+                lo, hi, r["wall_time_s"], r["wall_time_s"] / sim_s if sim_s else float("nan")]
+
     rows = []
     for label, key, values in ESCAPEE_KNOBS:
-        for r in [default] + [sr for sr in sweep_rows[1:] if key in sr["overrides"]]:
+        for r in [default] + [sr for sr in sweep_rows[2:] if key in sr["overrides"]]:
             value = r["overrides"].get(key, ESCAPEE_DEFAULTS[key])
-            summary = json.loads((out / ("escapees-quick" if quick else "escapees")
-                                  / r["folder"] / "summary.json").read_text())
-            sim_s = sum((x["t_stop"] or 0.0) for x in summary["realizations"])
-            lo, hi = r["mean_escapees_ci"]
-            rows.append([key, _knob_value(key, value), r["n_ok"], r["n_clogged"],
-                         r["n_unstable"], r["mean_escapees"], lo, hi, r["wall_time_s"],
-                         r["wall_time_s"] / sim_s if sim_s else float("nan")])
+            rows.append(row(key, _knob_value(key, value), r))
+    rows.append(row("paper-like", "dt 3.75e-7 s, solve every 1e4 steps", paper))
     csv_path = _write(out, "escapees", [
         "knob", "value", "realizations_ok", "clogged", "unstable", "mean_escapees",
         "mean_escapees_ci_lo", "mean_escapees_ci_hi", "wall_s",
         "wall_s_per_realization_s"], rows)
+    _compare_paper(out, folder, default, paper, rows[0], rows[-1])
     png = _escapee_chart(out, rows, n)
     return rows, csv_path, png
+
+
+def _ok_samples(folder, r):
+    real = json.loads((folder / r["folder"] / "summary.json").read_text())["realizations"]
+    ok = [x for x in real if x["status"] == "ok"]
+    return [x["escapees"] for x in ok], [bool(x["clogged"]) for x in ok]
+
+
+def _compare_paper(out, folder, default, paper, auto_row, paper_row):
+    """The auto defaults against the paper's settings: speed-up and the change in
+    <s> (paper-like minus auto) with its bootstrap interval; to paper.json."""
+    from taichi_hsdem.stats import mean_difference
+    (sa, ca), (sp, cp) = _ok_samples(folder, default), _ok_samples(folder, paper)
+    diff, (lo, hi) = mean_difference(sa, ca, sp, cp)
+    result = {
+        "auto": {"mean_escapees": auto_row[5], "ci": auto_row[6:8], "realizations": len(sa),
+                 "clogged": int(sum(ca)), "wall_s_per_realization_s": auto_row[9]},
+        "paper_like": {"mean_escapees": paper_row[5], "ci": paper_row[6:8],
+                       "realizations": len(sp), "clogged": int(sum(cp)),
+                       "wall_s_per_realization_s": paper_row[9]},
+        "speedup_auto_over_paper": paper_row[9] / auto_row[9],
+        "mean_change_paper_minus_auto": diff, "mean_change_ci95": [lo, hi],
+    }
+    (out / "paper.json").write_text(json.dumps(result, indent=1) + "\n")
+    print(f"auto against paper-like: {result['speedup_auto_over_paper']:.3g}x faster; "
+          f"<s> paper - auto = {diff:.3g} (95 % interval {lo:.3g} to {hi:.3g})",
+          file=sys.stderr)
 
 
 def _escapee_chart(out, rows, n):
@@ -212,6 +249,10 @@ def _escapee_chart(out, rows, n):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    paper = [r for r in rows if r[0] == "paper-like"][0]
+    if paper[5] is not None:
+        ax.errorbar([paper[9]], [paper[5]], yerr=[[paper[5] - paper[6]], [paper[7] - paper[5]]],
+                    fmt="k*", ms=10, capsize=3, label="paper-like (dt 3.75e-7 s, 1e4 steps)")
     for k, (label, key, _) in enumerate(ESCAPEE_KNOBS):
         sel = sorted((r for r in rows if r[0] == key), key=lambda r: r[9])
         xs = np.array([r[9] for r in sel]) * (1 + 0.02 * (k - 1.5))  # spread the default

@@ -1,0 +1,131 @@
+"""Many DEM steps of disks in one kernel launch (``run.stepping = "fused"``).
+
+The per-step path launches three kernels per step (load the held fluid force,
+contacts, integration) and reads a flag on the host to know whether the
+neighbour list needs a rebuild. For the small bodies counts of a clogging scene
+(tens to hundreds of disks per realization) the work of a step is a few
+microseconds and the launches cost far more: the paper-like scene ran 1260
+steps/s, about 0.8 ms per step, nearly all of it host overhead.
+
+Here one launch advances every running realization by ``n`` steps. Each
+realization is one task (realizations run in parallel, one per thread); inside
+it the steps, bodies and contacts run serially: forces of every body, then the
+integration of every body, then, when some body has moved half the Verlet skin,
+that realization's own neighbour-list rebuild. Serial order inside a realization
+makes the summation order fixed, so a realization's result does not depend on
+what runs beside it, as on the per-step path. The arithmetic is the per-step
+path's own functions (``contact.disk_force``, ``integrate.advance_body``,
+``neighbors.bin_one``/``list_one``).
+
+Fluid forces are the held ones (``fluid.force_update = "solve"``): between two
+pressure solves nothing else changes them. The shear history is double-buffered
+as on the per-step path; step ``k`` reads buffer ``k % 2``.
+
+A rebuild whose cell or neighbour capacity overflows stops that realization at
+the step it reached (``done[r]``): the host grows the arrays, rebuilds, and lets
+it catch up, so no contact is dropped.
+"""
+
+from .backend import ti  # sets the environment before Taichi loads
+
+from .contact import disk_force
+from .integrate import advance_body
+from .neighbors import bin_one, list_one
+
+
+@ti.func
+def _forces(x: ti.template(), v: ti.template(), w: ti.template(), f: ti.template(),
+            tau: ti.template(), f_fluid: ti.template(), tau_fluid: ti.template(),
+            alive: ti.template(), nbr: ti.template(), nbr_n: ti.template(),
+            sp: ti.template(), rad: ti.template(), mass: ti.template(), pair: ti.template(),
+            wallp: ti.template(), wall: ti.template(), wall_grad: ti.template(),
+            wall_meta: ti.template(), hp_old: ti.template(), hs_old: ti.template(),
+            hp_new: ti.template(), hs_new: ti.template(), prm: ti.template(),
+            flags: ti.template(), slots: ti.template(), r):
+    deepest = 0.0
+    for i in range(x.shape[1]):
+        if alive[r, i] != 0:
+            ftot, mtot, d = disk_force(x, v, w, alive, nbr, nbr_n, sp, rad, mass, pair, wallp,
+                                       wall, wall_grad, wall_meta, hp_old, hs_old, hp_new,
+                                       hs_new, prm, flags, slots, r, i)
+            f[r, i] = f_fluid[r, i] + ftot
+            tau[r, i] = tau_fluid[r, i] + mtot
+            deepest = ti.max(deepest, d)
+    return deepest
+
+
+@ti.kernel
+def disk_steps(n_steps: ti.i32, x: ti.types.ndarray(), th: ti.types.ndarray(),
+               v: ti.types.ndarray(), w: ti.types.ndarray(), f: ti.types.ndarray(),
+               tau: ti.types.ndarray(), f_fluid: ti.types.ndarray(),
+               tau_fluid: ti.types.ndarray(), f_ext: ti.types.ndarray(),
+               tau_ext: ti.types.ndarray(), alive: ti.types.ndarray(),
+               running: ti.types.ndarray(), sp: ti.types.ndarray(), rad: ti.types.ndarray(),
+               mass: ti.types.ndarray(), inertia: ti.types.ndarray(), deq: ti.types.ndarray(),
+               xi: ti.types.ndarray(), pair: ti.types.ndarray(), wallp: ti.types.ndarray(),
+               wall: ti.types.ndarray(), wall_grad: ti.types.ndarray(),
+               wall_meta: ti.types.ndarray(), hp_a: ti.types.ndarray(),
+               hs_a: ti.types.ndarray(), hp_b: ti.types.ndarray(), hs_b: ti.types.ndarray(),
+               prm: ti.types.ndarray(), iprm: ti.types.ndarray(),
+               max_overlap: ti.types.ndarray(), flags: ti.types.ndarray(),
+               bad: ti.types.ndarray(), escaped: ti.types.ndarray(),
+               x_ref: ti.types.ndarray(), rb: ti.types.ndarray(),
+               cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
+               nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(), grid: ti.types.ndarray(),
+               ncx: ti.i32, ncy: ti.i32, done: ti.types.ndarray(), builds: ti.types.ndarray(),
+               slots: ti.template()):
+    """Advance every running realization by up to ``n_steps`` steps.
+
+    ``done[r]``: the steps realization ``r`` took (``n_steps`` unless it went bad
+    or a neighbour rebuild overflowed). ``builds[r]`` counts its rebuilds. The
+    latest shear history ends in buffer ``a`` when ``n_steps`` is even, else ``b``,
+    for every realization (one that stopped early, or did not run, is copied
+    there), so that the host swaps the two buffers of the whole batch.
+    """
+    n_part = x.shape[1]
+    ti.loop_config(block_dim=1)  # one realization per task
+    for r in range(x.shape[0]):
+        deepest = max_overlap[r]
+        s = 0
+        stop = 1 - running[r]        # a stopped realization takes no step
+        while s < n_steps and stop == 0:
+            if s % 2 == 0:
+                deepest = ti.max(deepest, _forces(
+                    x, v, w, f, tau, f_fluid, tau_fluid, alive, nbr, nbr_n, sp, rad, mass,
+                    pair, wallp, wall, wall_grad, wall_meta, hp_a, hs_a, hp_b, hs_b, prm,
+                    flags, slots, r))
+            else:
+                deepest = ti.max(deepest, _forces(
+                    x, v, w, f, tau, f_fluid, tau_fluid, alive, nbr, nbr_n, sp, rad, mass,
+                    pair, wallp, wall, wall_grad, wall_meta, hp_b, hs_b, hp_a, hs_a, prm,
+                    flags, slots, r))
+            moved = 0
+            for i in range(n_part):
+                if alive[r, i] != 0:
+                    if advance_body(x, th, v, w, f, tau, f_ext, tau_ext, alive, sp, mass,
+                                    inertia, deq, xi, x_ref, iprm, bad, escaped, r, i):
+                        moved = 1
+            s += 1
+            if bad[r] != 0:
+                stop = 1
+            elif moved != 0:
+                builds[r] += 1
+                bin_one(x, alive, running, cell_n, cell_p, grid, ncx, ncy, flags, r)
+                for c in range(ncx * ncy):
+                    if cell_n[r, c] > cell_p.shape[2]:
+                        stop = 1
+                for i in range(n_part):
+                    if list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n,
+                                grid, ncx, ncy, flags, r, i) > nbr.shape[2]:
+                        stop = 1
+        done[r] = s
+        max_overlap[r] = deepest
+        if s % 2 != n_steps % 2:
+            # the latest history is in the other buffer: copy it where the host looks
+            for i, k, q in ti.ndrange(n_part, hp_a.shape[2], slots):
+                if s % 2 == 0:
+                    hp_b[r, i, k, q] = hp_a[r, i, k, q]
+                    hs_b[r, i, k, q] = hs_a[r, i, k, q]
+                else:
+                    hp_a[r, i, k, q] = hp_b[r, i, k, q]
+                    hs_a[r, i, k, q] = hs_b[r, i, k, q]

@@ -1,0 +1,101 @@
+"""The fused stepper (``run.stepping = "fused"``, many steps per kernel launch) is the
+per-step path's arithmetic in another order of launches: the same scene gives the
+same bits on both, also when a neighbour rebuild overflows inside a launch and the
+realization has to stop and catch up."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from taichi_hsdem import Simulation, load_scene
+from taichi_hsdem.scene import SceneError
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+HOURGLASS = SCENES / "hourglass24.toml"
+# Placed next to the neck, as in test_ensemble, so that disks touch, jam and escape
+# within the run: contacts, shear history, walls, escapes and re-feeding all happen.
+SHORT = ["run.t_end=4.0", "feed.region=[14.0, 22.0]", "run.realizations=2",
+         "run.seed=3", "run.stop_at_clog=false"]
+
+
+def run(stepping, extra=(), shrink=False):
+    sim = Simulation(load_scene(HOURGLASS, SHORT + [f"run.stepping={stepping}", *extra]))
+    if shrink:
+        # capacities just large enough for the loose initial placement: the denser
+        # packing at the neck overflows them in the kernel's own rebuilds
+        nl = sim.nlist
+        nl.cell_cap, nl.nbr_cap = 1, 1
+        nl._alloc_cells()
+        nl._alloc_nbr()
+        sim._rebuild()
+        sim.initial_caps = (nl.cell_cap, nl.nbr_cap)
+        launch, step = sim._fused_launch, sim.step
+        calls = {"launch": 0, "step": 0}
+
+        def counted_launch(k):
+            calls["launch"] += 1
+            launch(k)
+
+        def counted_step(n=1):
+            calls["step"] += 1
+            step(n)
+        sim._fused_launch, sim.step = counted_launch, counted_step
+        sim.calls = calls
+    res = sim.run()
+    return sim, res
+
+
+@pytest.fixture(scope="module")
+def per_step():
+    return run("per_step")
+
+
+def _same(a, b):
+    (sa, ra), (sb, rb) = a, b
+    xa, xb = sa.state(), sb.state()
+    for key in ("x", "v", "theta", "omega", "alive"):
+        np.testing.assert_array_equal(xa[key], xb[key], err_msg=key)
+    assert ([r["escapees"] for r in ra.summary["realizations"]]
+            == [r["escapees"] for r in rb.summary["realizations"]])
+    assert sa.steps == sb.steps
+
+
+def test_per_step_run_is_not_vacuous(per_step):
+    sim, res = per_step
+    escapees = [r["escapees"] for r in res.summary["realizations"]]
+    assert sum(escapees) > 0, escapees            # bodies reached the escape line
+    assert res.summary["neighbor_builds"] > 5     # and moved enough to need new lists
+    f, _ = sim.forces()
+    assert np.abs(f).max() > 0                    # contacts (no fluid here) pushed
+
+
+def test_fused_gives_the_per_step_bits(per_step):
+    fused = run("fused")
+    assert fused[0]._fused and not per_step[0]._fused
+    _same(fused, per_step)
+
+
+def test_overflowing_rebuilds_catch_up(per_step):
+    """Capacities of one: the kernel stops each realization at its overflowing
+    rebuild, the host grows the arrays and the realization catches up; nothing is
+    dropped, so the result is still the per-step one."""
+    sim, res = run("fused", shrink=True)
+    assert (sim.nlist.cell_cap, sim.nlist.nbr_cap) != sim.initial_caps   # grown in the run
+    assert sim.calls["launch"] > sim.calls["step"]                     # and caught up
+    _same((sim, res), per_step)
+
+
+def test_auto_records_its_choice():
+    sim = Simulation(load_scene(HOURGLASS, SHORT))
+    assert sim._fused and sim.scene.run.stepping == "fused"
+    assert "run.stepping" in sim.model.notes
+
+
+def test_fused_refused_where_it_does_not_apply():
+    with pytest.raises(SceneError, match="not all disks"):
+        Simulation(load_scene(SCENES / "squares.toml",
+                              ["run.stepping=fused", "run.t_end=0.01"]))
+    # auto falls back to per_step there, and says why
+    sim = Simulation(load_scene(SCENES / "squares.toml", ["run.t_end=0.01"]))
+    assert not sim._fused and sim.scene.run.stepping == "per_step"
+    assert "not all disks" in sim.model.notes["run.stepping"]
