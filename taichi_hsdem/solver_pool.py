@@ -58,8 +58,11 @@ def solve_block(token, pattern, rows, new_data, rhs, guess, tol, maxiter):
     rows : sequence of int
         Realization numbers, in the order of ``rhs`` and ``guess``.
     new_data : dict
-        ``{realization: CSR values}`` for the realizations whose matrix changed:
-        their hierarchies are rebuilt.
+        ``{realization: [(mode, CSR values), ...]}`` for the realizations whose
+        matrix changed, applied in order: ``"full"`` builds a Ruge-Stuben
+        hierarchy of that matrix, ``"refresh"`` keeps the realization's hierarchy
+        (its coarsening and interpolation) and recomputes the Galerkin operators
+        of the new matrix (:func:`refresh`).
     rhs, guess : numpy.ndarray, shape (len(rows), n)
     tol : float
         Relative residual of the CG solve.
@@ -82,13 +85,17 @@ def solve_block(token, pattern, rows, new_data, rhs, guess, tol, maxiter):
         _PATTERNS[token] = pattern
     n, indptr, indices = _PATTERNS[token]
     t0 = time.perf_counter()
-    for r, data in new_data.items():
-        # Own arrays: eliminate_zeros prunes them in place and the hierarchy keeps
-        # a reference to its matrix.
-        A = sp.csr_array((np.ascontiguousarray(data, dtype=float), indices.copy(),
-                          indptr.copy()), shape=(n, n))
-        A.eliminate_zeros()
-        _CACHE[token, r] = pyamg.ruge_stuben_solver(A, **AMG_OPTIONS)
+    for r, ops in new_data.items():
+        for mode, data in ops:
+            # Own arrays: eliminate_zeros prunes them in place and the hierarchy
+            # keeps a reference to its matrix.
+            A = sp.csr_array((np.ascontiguousarray(data, dtype=float), indices.copy(),
+                              indptr.copy()), shape=(n, n))
+            A.eliminate_zeros()
+            if mode == "full":
+                _CACHE[token, r] = pyamg.ruge_stuben_solver(A, **AMG_OPTIONS)
+            else:
+                refresh(_CACHE[token, r], A)
     setup = time.perf_counter() - t0
     x = np.zeros((len(rows), n))
     iterations = np.zeros(len(rows), dtype=int)
@@ -105,6 +112,20 @@ def solve_block(token, pattern, rows, new_data, rhs, guess, tol, maxiter):
         iterations[i] = len(history) - 1
         residual[i] = np.linalg.norm(b - hierarchy.levels[0].A @ x[i]) / bnorm
     return x, iterations, residual, setup
+
+
+def refresh(hierarchy, A):
+    """Put the fine matrix ``A`` into ``hierarchy`` in place: the coarse operators
+    become the Galerkin products ``R A P`` of the hierarchy's own interpolation and
+    the coarse LU is redone. The result depends only on the matrix the hierarchy
+    was built from and on ``A``, not on what was refreshed in between."""
+    import pyamg
+
+    levels = hierarchy.levels
+    levels[0].A = A
+    for fine, coarse in zip(levels[:-1], levels[1:]):
+        coarse.A = (fine.R @ fine.A @ fine.P).tocsr()
+    hierarchy.coarse_solver = pyamg.multilevel.coarse_grid_solver(AMG_OPTIONS["coarse_solver"])
 
 
 def forget(token):

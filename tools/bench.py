@@ -148,6 +148,9 @@ def run_case(case, arch, precision, sim_time):
         # resident memory (process + workers) over the run's first and second half
         "rss_mb_first_half_max": max((m for _, m in samples[:half]), default=None),
         "rss_mb_second_half_max": max((m for _, m in samples[half:]), default=None),
+        # (simulated s, MB) every t_end / 8: the solver workers join once the solves
+        # have taken 2 s (fluid.POOL_AFTER_SECONDS); after that the total should be flat
+        "rss_mb_samples": [[round(t, 4), m] for t, m in samples],
     }
 
 
