@@ -1,8 +1,10 @@
 """A batch of realizations of one scene: set-up, the step loop, and its results.
 
 The host orchestrates; kernels do the per-body work. Per DEM step: fluid pressure
-forces (or a clear), contact forces, integration; the host reads one small flag
-array to know whether the neighbour list needs a rebuild. Every
+forces (or a clear), contact forces, integration; on the per-step path the host
+reads one small flag array to know whether the neighbour list needs a rebuild,
+while the fused stepper (``fused.py``, disks) runs all the steps up to the next
+check in one launch and rebuilds inside it. Every
 ``check_every`` steps it reads escapes, stability flags and speeds, feeds the
 inlet, looks for clogs and samples the time series; every
 ``fluid.update_interval`` steps it re-rasterises the permeability and re-solves
