@@ -39,3 +39,10 @@ def test_escapee_study_moves_one_knob_at_a_time_off_the_scene_defaults():
         __import__("pytest").approx(model.d_min / 6, rel=1e-12)
     for _, key, values in conv.ESCAPEE_KNOBS:
         assert conv.ESCAPEE_DEFAULTS[key] not in values
+
+
+def test_paper_settings_are_the_same_in_the_study_and_the_benchmark():
+    conv, bench = _load("convergence"), _load("bench")
+    assert conv.PAPER_POINT == {"run.dt": bench.PAPER_DT,
+                                "fluid.update_interval": bench.PAPER_FLUID_EVERY}
+    assert bench.PAPER_DT == 3.75e-7 and bench.PAPER_FLUID_EVERY == 10000  # Zhou et al.
