@@ -110,10 +110,8 @@ def disk_steps(n_steps: ti.i32, x: ti.types.ndarray(), th: ti.types.ndarray(),
                 stop = 1
             elif moved != 0:
                 builds[r] += 1
-                bin_one(x, alive, running, cell_n, cell_p, grid, ncx, ncy, flags, r)
-                for c in range(ncx * ncy):
-                    if cell_n[r, c] > cell_p.shape[2]:
-                        stop = 1
+                if bin_one(x, alive, running, cell_n, cell_p, grid, ncx, ncy, flags, r):
+                    stop = 1
                 for i in range(n_part):
                     if list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n,
                                 grid, ncx, ncy, flags, r, i) > nbr.shape[2]:

@@ -28,7 +28,8 @@ def bin_particles(x: ti.types.ndarray(), alive: ti.types.ndarray(), running: ti.
                   cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
                   grid: ti.types.ndarray(), ncx: ti.i32, ncy: ti.i32, flags: ti.types.ndarray()):
     for r in range(x.shape[0]):
-        bin_one(x, alive, running, cell_n, cell_p, grid, ncx, ncy, flags, r)
+        bin_one(x, alive, running, cell_n, cell_p, grid, ncx, ncy, flags, r)  # (the
+        # overflow it returns is for the fused stepper; here flags carries it)
 
 
 @ti.func
@@ -43,8 +44,10 @@ def cell_of(grid: ti.template(), ncx, ncy, p):
 def bin_one(x: ti.template(), alive: ti.template(), running: ti.template(),
             cell_n: ti.template(), cell_p: ti.template(), grid: ti.template(), ncx, ncy,
             flags: ti.template(), r):
-    """Bin the live bodies of realization ``r``, serially (a reproducible order)."""
+    """Bin the live bodies of realization ``r``, serially (a reproducible order);
+    returns 1 if a cell overflowed its capacity."""
     cap = cell_p.shape[2]
+    overflow = 0
     for c in range(ncx * ncy):
         cell_n[r, c] = 0
     if running[r] != 0:
@@ -57,7 +60,9 @@ def bin_one(x: ti.template(), alive: ti.template(), running: ti.template(),
                     cell_p[r, c, slot] = i
                 else:
                     flags[F_CELL_OVERFLOW] = 1
+                    overflow = 1
                 cell_n[r, c] = slot + 1
+    return overflow
 
 
 @ti.kernel

@@ -183,42 +183,61 @@ def _knob_value(key, value):
     return round(D_VANI / value, 3) if key == "fluid.cell_size" else value
 
 
-def escapee_study(out, quick, realizations=None):
+def _sweep(study, points, folder, n, seed, quick):
+    """Run ``points`` of the vani scene (``n`` realizations from ``seed``); every
+    point must give a result."""
     from taichi_hsdem.sweep import run_sweep
-    scene_path = ROOT / "scenes" / "vani_phi026.toml"
-    n = realizations or (2 if quick else 20)
-    common = {"run.realizations": n, "run.seed": 1000}
+    common = {"run.realizations": n, "run.seed": seed}
     if quick:
         common["run.t_end"] = 0.3
+    rows = run_sweep(ROOT / "scenes" / "vani_phi026.toml", points, folder, common=common,
+                     progress=lambda m: print(m, file=sys.stderr))
+    bad = [r for r in rows if r["status"] not in ("ran", "skipped", "unstable")]
+    if bad:
+        raise SystemExit(f"{study} study: points without results: "
+                         f"{[(r['folder'], r['status'], r['message']) for r in bad]}")
+    return rows
+
+
+def _point(folder, r):
+    """One sweep point: its statistics, cost and the stable realizations' samples."""
+    real = json.loads((folder / r["folder"] / "summary.json").read_text())["realizations"]
+    sim_s = sum((x["t_stop"] or 0.0) for x in real)
+    ok = [x for x in real if x["status"] == "ok"]
+    return {"n_ok": r["n_ok"], "n_clogged": r["n_clogged"], "n_unstable": r["n_unstable"],
+            "mean": r["mean_escapees"], "ci": list(r["mean_escapees_ci"]),
+            "wall_s": r["wall_time_s"],
+            "wall_per_sim_s": r["wall_time_s"] / sim_s if sim_s else float("nan"),
+            "escapees": [x["escapees"] for x in ok],
+            "clogged": [bool(x["clogged"]) for x in ok]}
+
+
+def _row(label, value, pt):
+    return [label, value, pt["n_ok"], pt["n_clogged"], pt["n_unstable"], pt["mean"],
+            *pt["ci"], pt["wall_s"], pt["wall_per_sim_s"]]
+
+
+ROW_HEADER = ["realizations_ok", "clogged", "unstable", "mean_escapees",
+              "mean_escapees_ci_lo", "mean_escapees_ci_hi", "wall_s",
+              "wall_s_per_realization_s"]
+
+
+def escapee_study(out, quick, realizations=None):
+    n = realizations or (2 if quick else 20)
+    folder = out / ("escapees-quick" if quick else "escapees")
     # the default and the paper-like point first: they are the comparison
     points = [{}, PAPER_POINT] + [{key: v} for _, key, values in ESCAPEE_KNOBS for v in values]
-    folder = out / ("escapees-quick" if quick else "escapees")
-    sweep_rows = run_sweep(scene_path, points, folder,
-                           common=common, progress=lambda m: print(m, file=sys.stderr))
-    bad = [r for r in sweep_rows if r["status"] not in ("ran", "skipped", "unstable")]
-    if bad:
-        raise SystemExit(f"escapee study: points without results: "
-                         f"{[(r['folder'], r['status'], r['message']) for r in bad]}")
-    default, paper = sweep_rows[0], sweep_rows[1]
-
-    def row(key, value, r):
-        summary = json.loads((folder / r["folder"] / "summary.json").read_text())
-        sim_s = sum((x["t_stop"] or 0.0) for x in summary["realizations"])
-        lo, hi = r["mean_escapees_ci"]
-        return [key, value, r["n_ok"], r["n_clogged"], r["n_unstable"], r["mean_escapees"],
-                lo, hi, r["wall_time_s"], r["wall_time_s"] / sim_s if sim_s else float("nan")]
-
+    sweep_rows = _sweep("escapee", points, folder, n, 1000, quick)
+    default, paper = _point(folder, sweep_rows[0]), _point(folder, sweep_rows[1])
     rows = []
     for label, key, values in ESCAPEE_KNOBS:
-        for r in [default] + [sr for sr in sweep_rows[2:] if key in sr["overrides"]]:
-            value = r["overrides"].get(key, ESCAPEE_DEFAULTS[key])
-            rows.append(row(key, _knob_value(key, value), r))
-    rows.append(row("paper-like", "dt 3.75e-7 s, solve every 1e4 steps", paper))
-    csv_path = _write(out, "escapees", [
-        "knob", "value", "realizations_ok", "clogged", "unstable", "mean_escapees",
-        "mean_escapees_ci_lo", "mean_escapees_ci_hi", "wall_s",
-        "wall_s_per_realization_s"], rows)
-    _compare_paper(out / "escapees-paper.json", folder, default, paper, rows[0], rows[-1])
+        rows.append(_row(key, _knob_value(key, ESCAPEE_DEFAULTS[key]), default))
+        for r in sweep_rows[2:]:
+            if key in r["overrides"]:
+                rows.append(_row(key, _knob_value(key, r["overrides"][key]), _point(folder, r)))
+    rows.append(_row("paper-like", "dt 3.75e-7 s, solve every 1e4 steps", paper))
+    csv_path = _write(out, "escapees", ["knob", "value"] + ROW_HEADER, rows)
+    _compare_paper(out / "escapees-paper.json", default, paper)
     png = _escapee_chart(out, rows, n)
     return rows, csv_path, png
 
@@ -226,58 +245,32 @@ def escapee_study(out, quick, realizations=None):
 def paper_study(out, quick, realizations=None):
     """The auto defaults against the paper's settings alone, with more
     realizations than the knob study (seeds from 2000, apart from its 1000...)."""
-    from taichi_hsdem.sweep import run_sweep
-    scene_path = ROOT / "scenes" / "vani_phi026.toml"
     n = realizations or (2 if quick else 60)
-    common = {"run.realizations": n, "run.seed": 2000}
-    if quick:
-        common["run.t_end"] = 0.3
     folder = out / ("paper-quick" if quick else "paper")
-    default, paper = run_sweep(scene_path, [{}, PAPER_POINT], folder, common=common,
-                               progress=lambda m: print(m, file=sys.stderr))
-    bad = [r for r in (default, paper) if r["status"] not in ("ran", "skipped", "unstable")]
-    if bad:
-        raise SystemExit(f"paper study: points without results: "
-                         f"{[(r['folder'], r['status'], r['message']) for r in bad]}")
-    rows = []
-    for label, r in (("auto", default), ("paper-like", paper)):
-        summary = json.loads((folder / r["folder"] / "summary.json").read_text())
-        sim_s = sum((x["t_stop"] or 0.0) for x in summary["realizations"])
-        lo, hi = r["mean_escapees_ci"]
-        rows.append([label, r["n_ok"], r["n_clogged"], r["n_unstable"], r["mean_escapees"],
-                     lo, hi, r["wall_time_s"], r["wall_time_s"] / sim_s])
-    csv_path = _write(out, "paper", [
-        "settings", "realizations_ok", "clogged", "unstable", "mean_escapees",
-        "mean_escapees_ci_lo", "mean_escapees_ci_hi", "wall_s", "wall_s_per_realization_s"],
-        rows)
-    auto_row = [None] * 5 + rows[0][4:7] + [None, rows[0][8]]
-    paper_row = [None] * 5 + rows[1][4:7] + [None, rows[1][8]]
+    default, paper = (_point(folder, r) for r in
+                      _sweep("paper", [{}, PAPER_POINT], folder, n, 2000, quick))
+    rows = [[label] + _row(label, None, pt)[2:]
+            for label, pt in (("auto", default), ("paper-like", paper))]
+    csv_path = _write(out, "paper", ["settings"] + ROW_HEADER, rows)
     json_path = out / "paper.json"
-    _compare_paper(json_path, folder, default, paper, auto_row, paper_row)
+    _compare_paper(json_path, default, paper)
     return rows, csv_path, json_path
 
 
-def _ok_samples(folder, r):
-    real = json.loads((folder / r["folder"] / "summary.json").read_text())["realizations"]
-    ok = [x for x in real if x["status"] == "ok"]
-    return [x["escapees"] for x in ok], [bool(x["clogged"]) for x in ok]
-
-
-def _compare_paper(path, folder, default, paper, auto_row, paper_row):
-    """The auto defaults against the paper's settings: speed-up and the change in
-    <s> (paper-like minus auto) with its bootstrap interval, written to ``path``.
-    The rows are escapee-study rows: <s> and its interval at 5-7, wall seconds per
-    realization-second at 9."""
+def _compare_paper(path, auto, paper):
+    """The auto defaults against the paper's settings (two :func:`_point` results):
+    speed-up and the change in <s> (paper-like minus auto) with its bootstrap
+    interval, written to ``path``."""
     from taichi_hsdem.stats import mean_difference
-    (sa, ca), (sp, cp) = _ok_samples(folder, default), _ok_samples(folder, paper)
-    diff, (lo, hi) = mean_difference(sa, ca, sp, cp)
+    diff, (lo, hi) = mean_difference(auto["escapees"], auto["clogged"],
+                                     paper["escapees"], paper["clogged"])
+
+    def part(pt):
+        return {"mean_escapees": pt["mean"], "ci": pt["ci"], "realizations": pt["n_ok"],
+                "clogged": pt["n_clogged"], "wall_s_per_realization_s": pt["wall_per_sim_s"]}
     result = {
-        "auto": {"mean_escapees": auto_row[5], "ci": auto_row[6:8], "realizations": len(sa),
-                 "clogged": int(sum(ca)), "wall_s_per_realization_s": auto_row[9]},
-        "paper_like": {"mean_escapees": paper_row[5], "ci": paper_row[6:8],
-                       "realizations": len(sp), "clogged": int(sum(cp)),
-                       "wall_s_per_realization_s": paper_row[9]},
-        "speedup_auto_over_paper": paper_row[9] / auto_row[9],
+        "auto": part(auto), "paper_like": part(paper),
+        "speedup_auto_over_paper": paper["wall_per_sim_s"] / auto["wall_per_sim_s"],
         "mean_change_paper_minus_auto": diff, "mean_change_ci95": [lo, hi],
     }
     path.write_text(json.dumps(result, indent=1) + "\n")
