@@ -67,7 +67,9 @@ class VideoRecorder:
     :attr:`frame_times`: ``output.frames`` frames evenly spaced over
     ``[0, run.t_end]``, frame 0 being the initial state (drawn before the first
     step), played at ``output.fps``. The realization shown is
-    ``output.video_realization``.
+    ``output.video_realization``. The video ends with the first frame drawn after
+    that realization stopped (a clog, or an instability): it shows the final state
+    once instead of repeating it up to ``t_end``.
 
     The pressure colour map keeps one range for the whole video, that of the
     pressure field at construction time, i.e. the initial solve (the open
@@ -112,6 +114,7 @@ class VideoRecorder:
         self.tmp = None if path is None else self.path.with_name(self.path.name + ".part.mp4")
         self.writer = None if path is None else VideoWriter(self.tmp, self.fps)
         self.frames = 0
+        self.ended = False          # the shown realization stopped and its last frame is drawn
         self.seconds = 0.0          # drawing and encoding frames, inside the run
         self.finish_seconds = 0.0   # flushing the encoder at close
         self.setup_seconds = time.perf_counter() - t0
@@ -173,10 +176,12 @@ class VideoRecorder:
 
     def __call__(self, sim):
         import time
-        if self.error is not None:
+        if self.error is not None or self.ended:
             return
         t0 = time.perf_counter()
         r = self.r
+        # stopped (checked before drawing): this frame shows the final state, the last
+        self.ended = not bool(sim.running.to_numpy()[r])
         try:
             pres = None
             if sim.fluid is not None:
@@ -207,7 +212,8 @@ class VideoRecorder:
         (which includes the frames' drawing and encoding)."""
         share = self.seconds / wall_time_s if wall_time_s > 0 else None
         return {"file": None if self.error or self.path is None else self.path.name,
-                "frames": self.frames, "fps": self.fps, "realization": self.r,
+                "frames": self.frames, "ended_at_stop": self.ended,
+                "fps": self.fps, "realization": self.r,
                 "width": self.renderer.width, "height": self.renderer.height,
                 "pressure_range": (None if self.pressure_range is None
                                    else list(self.pressure_range)),

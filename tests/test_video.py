@@ -308,6 +308,40 @@ def test_frame_zero_is_the_initial_state_and_the_range_is_fixed(tmp_path):
     assert summary["frames"] == 4 and summary["pressure_range"] == list(rec.pressure_range)
 
 
+def test_the_video_ends_at_the_first_frame_after_the_realization_stopped(tmp_path):
+    """A neck narrower than every particle clogs the hourglass (about t = 14 of
+    20): the frames after the stop would repeat the final state, so the video ends
+    with the first frame drawn once the realization stopped, and that frame shows
+    the final state."""
+    needs_vulkan()
+    from taichi_hsdem import Simulation
+    from taichi_hsdem.output import VideoRecorder
+
+    sim = Simulation(load_scene(str(HOURGLASS), [
+        "run.t_end=20", "clog.window=0.5", "geometry.neck_width=0.8",
+        "output.frames=11", "output.width=480"]))
+    rec = VideoRecorder(sim, tmp_path / "video.mp4")
+    result = sim.run(on_frame=rec, frame_times=rec.frame_times)
+    rec.close(keep=True)
+    res = sim.results[0]
+    assert res.clogged and res.t_stop < 18.0        # stopped two frames or more early
+    # frames every 2: those before the check that stopped it, then the first at or
+    # after it (which sees the realization stopped)
+    expected = sum(1 for t in rec.frame_times if t < res.t_stop - 0.5 * sim.dt) + 1
+    assert rec.error is None and rec.ended and rec.frames == expected < 11
+    _, frames = read_video(tmp_path / "video.mp4")
+    assert len(frames) == expected
+    r = rec.renderer
+    state = result.final
+    for x, alive, sp in zip(state["x"][0], state["alive"][0], state["species"]):
+        if alive:
+            col, row = r.world_to_pixel(x)[0]
+            rgb = np.median(frames[-1][int(row) - 1:int(row) + 2,
+                                       int(col) - 1:int(col) + 2].reshape(-1, 3), axis=0)
+            assert close_to(rgb, species_rgb(sp)), (x, sp, rgb)
+    assert rec.summary(result.summary["wall_time_s"])["ended_at_stop"] is True
+
+
 # ------------------------------------------------------------------ no Vulkan
 
 def test_without_vulkan_the_run_succeeds_without_a_video(tmp_path):
