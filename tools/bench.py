@@ -5,6 +5,7 @@
     python tools/bench.py --arch gpu      # on a GPU machine
     python tools/bench.py --cases disks-0.26-R10,paper-disks-0.26-R1
     python tools/bench.py --cases disks-0.26-R10@fluid.workers=1,disks-0.26-R10
+    python tools/bench.py --cases disks-0.26-R1 --sim-time 1 --video-frames 600
 
 Cases: disks and squares at packing fractions 0.17 and 0.26 in the vani channel
 (scenes/vani_phi026.toml; squares from scenes/squares.toml with the same count),
@@ -91,12 +92,15 @@ def _total_rss_mb():
     return sum(_rss_mb(pid, "VmRSS") or 0.0 for pid in pids)
 
 
-def run_case(case, arch, precision, sim_time):
+def run_case(case, arch, precision, sim_time, video_frames=0):
+    import tempfile
     import numpy as np
     from taichi_hsdem import Simulation, backend, load_scene
     backend.init(arch, precision)
     scene_path, ov = overrides(case, sim_time)
     ov += [f'run.arch="{arch}"', f'run.precision="{precision}"']
+    if video_frames:
+        ov.append(f"output.frames={video_frames}")
     sim = Simulation(load_scene(scene_path, ov))
     if sim.fluid is not None:
         sim._update_fluid(force=True)  # run()'s first solve (it sets the update interval)
@@ -108,9 +112,21 @@ def run_case(case, arch, precision, sim_time):
         if not samples or t >= samples[-1][0] + t_end / 8:
             samples.append((t, _total_rss_mb()))
 
+    rec = tmp = None
+    if video_frames:                 # draw and encode frames too (into a scratch folder)
+        from taichi_hsdem.output import VideoRecorder
+        tmp = tempfile.TemporaryDirectory(prefix="hsdem-bench-")
+        rec = VideoRecorder(sim, Path(tmp.name) / "video.mp4")
     t0 = time.perf_counter()
-    sim.run(progress=progress)
+    sim.run(progress=progress, on_frame=rec,
+            frame_times=rec.frame_times if rec is not None else None)
     wall = time.perf_counter() - t0
+    video = None
+    if rec is not None:
+        rec.close(keep=False)
+        tmp.cleanup()
+        video = {"frames": rec.frames, "error": rec.error,
+                 "render_share": round(rec.seconds / wall, 3)}
     steps = sim.steps - steps0
     # contact evaluations per step, from the final neighbour lists
     nbr = sim.nlist.nbr_n.to_numpy().astype(np.int64)
@@ -151,6 +167,7 @@ def run_case(case, arch, precision, sim_time):
         # (simulated s, MB) every t_end / 8: the solver workers join once the solves
         # have taken 2 s (fluid.POOL_AFTER_SECONDS); after that the total should be flat
         "rss_mb_samples": [[round(t, 4), m] for t, m in samples],
+        "video": video,
     }
 
 
@@ -162,16 +179,22 @@ def main(argv=None):
     p.add_argument("--cases", help="comma-separated case names (default: all)")
     p.add_argument("--sim-time", type=float, default=None,
                    help="simulated seconds per case (default 0.05, --quick 0.02)")
+    p.add_argument("--video-frames", type=int, default=0,
+                   help="also draw and encode this many video frames over the run "
+                        "(realization 0; a scratch file), to time them and to see "
+                        "whether memory grows per frame")
     p.add_argument("--one", help=argparse.SUPPRESS)   # internal: run one case here
     a = p.parse_args(argv)
     sim_time = a.sim_time or (0.02 if a.quick else 0.05)
     if a.one:
-        print(json.dumps(run_case(a.one, a.arch, a.precision, sim_time)), flush=True)
+        print(json.dumps(run_case(a.one, a.arch, a.precision, sim_time, a.video_frames)),
+              flush=True)
         return 0
     chosen = a.cases.split(",") if a.cases else cases(a.quick)
     for case in chosen:
         proc = subprocess.run([sys.executable, __file__, "--one", case, "--arch", a.arch,
-                               "--precision", a.precision, "--sim-time", str(sim_time)],
+                               "--precision", a.precision, "--sim-time", str(sim_time),
+                               "--video-frames", str(a.video_frames)],
                               capture_output=True, text=True)
         if proc.returncode != 0:
             print(json.dumps({"case": case, "error": proc.stderr.strip().splitlines()[-1:]}),
