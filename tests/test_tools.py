@@ -46,3 +46,23 @@ def test_paper_settings_are_the_same_in_the_study_and_the_benchmark():
     assert conv.PAPER_POINT == {"run.dt": bench.PAPER_DT,
                                 "fluid.update_interval": bench.PAPER_FLUID_EVERY}
     assert bench.PAPER_DT == 3.75e-7 and bench.PAPER_FLUID_EVERY == 10000  # Zhou et al.
+
+
+def test_interval_study_points_are_the_cells_they_are_labelled_with(monkeypatch):
+    """The interval study gives its points as steps (so that a folder stays the same
+    run whatever the default): each must be, to a step per half cell, what "auto"
+    resolves to at that many cells per solve, and the longest must be accepted."""
+    conv = _load("convergence")
+    from taichi_hsdem import Simulation, load_scene, simulation
+    vani = ROOT / "scenes" / "vani_phi026.toml"
+    steps = [int(round(c / 0.5 * conv.HALF_CELL_STEPS)) for c in conv.INTERVAL_CELLS]
+    for cells, k in zip(conv.INTERVAL_CELLS, steps):
+        monkeypatch.setattr(simulation, "UPDATE_CELL_FRACTION", cells)
+        sim = Simulation(load_scene(vani, ["run.realizations=1", 'fluid.workers=1']))
+        sim._update_fluid(force=True)
+        assert abs(sim.scene.fluid.update_interval - k) <= cells / 0.5, (cells, k)
+    monkeypatch.undo()
+    sim = Simulation(load_scene(vani, ["run.realizations=1", 'fluid.workers=1',
+                                       f"fluid.update_interval={steps[-1]}"]))
+    sim._update_fluid(force=True)          # would refuse an interval over half a diameter
+    assert sim.scene.fluid.update_interval == steps[-1]

@@ -4,6 +4,7 @@
     python tools/convergence.py contact  [--quick] [--out DIR]
     python tools/convergence.py escapees [--quick] [--out DIR] [--realizations N]
     python tools/convergence.py paper    [--quick] [--out DIR] [--realizations N]
+    python tools/convergence.py interval [--quick] [--out DIR] [--realizations N]
 
 ``pressure``: the hourglass scene's pressure field (particles as placed) at
 3 ... 12 fluid cells per smallest diameter against a 16-cell reference, sampled at
@@ -19,6 +20,13 @@ error against the time of one contact step.
 pressure solve every 1e4 steps) on the vani scene, 60 realizations each by
 default: the speed-up and the change in mean escapees with its 95 % bootstrap
 interval, in ``paper.json`` and ``paper.csv``.
+
+``interval``: the fluid update interval alone, with more realizations than the
+knob study (100 per point by default, seeds from 3000): a particle at the
+constriction's mean speed crossing 0.5, 1, 2 and 3 fluid cells between pressure
+solves (3 cells = half a diameter, the longest interval a scene may set); each
+point's mean escapees, its change from the 0.5-cell point with a 95 % bootstrap
+interval, and the wall time, in ``interval.csv`` and ``interval.png``.
 
 ``escapees``: the clogging statistics of the vani scene (mean escapees before a
 clog, censoring-aware, with its 95 % interval) as one knob at a time moves off its
@@ -257,6 +265,58 @@ def paper_study(out, quick, realizations=None):
     return rows, csv_path, json_path
 
 
+# Fluid cells a particle at the constriction's mean speed crosses between solves
+# (simulation.UPDATE_CELL_FRACTION is one of them); 164 steps is half a cell in the
+# vani scene at the auto time step, so the intervals are multiples of it. Given as
+# steps (not "auto") so that a point's folder stays the same run whatever the
+# default is.
+INTERVAL_CELLS = (0.5, 1.0, 2.0, 3.0)
+HALF_CELL_STEPS = 164
+
+
+def interval_study(out, quick, realizations=None):
+    from taichi_hsdem.stats import mean_difference
+    n = realizations or (2 if quick else 100)
+    folder = out / ("interval-quick" if quick else "interval")
+    steps = [int(round(c / 0.5 * HALF_CELL_STEPS)) for c in INTERVAL_CELLS]
+    pts = [_point(folder, r) for r in
+           _sweep("interval", [{"fluid.update_interval": k} for k in steps], folder, n, 3000,
+                  quick)]
+    ref = pts[0]
+    rows = []
+    for cells, k, pt in zip(INTERVAL_CELLS, steps, pts):
+        if pt is ref or not pt["escapees"] or not ref["escapees"]:
+            diff, lo, hi = (0.0, 0.0, 0.0) if pt is ref else (None, None, None)
+        else:
+            diff, (lo, hi) = mean_difference(ref["escapees"], ref["clogged"],
+                                             pt["escapees"], pt["clogged"])
+        rows.append([cells, k] + _row(None, None, pt)[2:] + [diff, lo, hi])
+    csv_path = _write(out, "interval", ["cells_per_solve", "steps"] + ROW_HEADER
+                      + ["change_from_half_cell", "change_ci_lo", "change_ci_hi"], rows)
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    xs = np.array([r[9] for r in rows], dtype=float)
+    ys = np.array([np.nan if r[5] is None else r[5] for r in rows], dtype=float)
+    lo = np.array([np.nan if r[6] is None else r[6] for r in rows], dtype=float)
+    hi = np.array([np.nan if r[7] is None else r[7] for r in rows], dtype=float)
+    ax.errorbar(xs, ys, yerr=[ys - lo, hi - ys], fmt="o-", capsize=3)
+    for x, y, r in zip(xs, ys, rows):
+        ax.annotate(f"{r[0]:g} cell ({r[1]} steps)", (x, y), textcoords="offset points",
+                    xytext=(4, 4), fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xlabel("wall seconds per simulated realization-second")
+    ax.set_ylabel("mean escapees before a clog <s> (95 % interval)")
+    ax.set_title(f"vani scene: fluid cells crossed between pressure solves, "
+                 f"{n} realizations per point", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out / "interval.png", dpi=120)
+    plt.close(fig)
+    return rows, csv_path, out / "interval.png"
+
+
 def _compare_paper(path, auto, paper):
     """The auto defaults against the paper's settings (two :func:`_point` results):
     speed-up and the change in <s> (paper-like minus auto) with its bootstrap
@@ -313,17 +373,20 @@ def _escapee_chart(out, rows, n):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("study", choices=("pressure", "contact", "escapees", "paper"))
+    p.add_argument("study", choices=("pressure", "contact", "escapees", "paper", "interval"))
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default=str(ROOT / "runs" / "convergence"))
     p.add_argument("--realizations", type=int, default=None,
                    help="escapees: realizations per point (default 20, --quick 2); "
-                        "paper: per setting (default 60)")
+                        "paper: per setting (default 60); interval: per point "
+                        "(default 100)")
     a = p.parse_args(argv)
     if a.study == "escapees":
         rows, csv_path, png = escapee_study(Path(a.out), a.quick, a.realizations)
     elif a.study == "paper":
         rows, csv_path, png = paper_study(Path(a.out), a.quick, a.realizations)
+    elif a.study == "interval":
+        rows, csv_path, png = interval_study(Path(a.out), a.quick, a.realizations)
     else:
         study = {"pressure": pressure_study, "contact": contact_study}[a.study]
         rows, csv_path, png = study(Path(a.out), a.quick)
