@@ -41,7 +41,10 @@ CHECK_TRAVEL = 0.05           # with fluid: d_min a particle at the constriction
 LS_HISTORY_SLOTS = 3          # contacts one surface node can remember at once
 DISK_HISTORY_SLOTS = 8        # contacts one disk can remember at once
 SKIN_FRACTION = 0.25          # Verlet skin as a fraction of the smallest d_eq
-UPDATE_CELL_FRACTION = 0.5    # fluid cells a particle may cross between auto-interval solves
+UPDATE_CELL_FRACTION = 1.0    # fluid cells a particle may cross between auto-interval solves:
+                              # the knee of `tools/convergence.py interval` (vani scene, 100
+                              # realizations per point: 0.5 and 1 cell agree, 2 and 3 cells
+                              # give fewer escapees; README, Accuracy)
 MAX_TRAVEL_BETWEEN_SOLVES = 0.5  # diameters a particle may move between solves, at most
 
 
@@ -492,7 +495,8 @@ class Simulation:
 
     def _resolve_update_interval(self):
         """``fluid.update_interval = "auto"``: the fastest expected particle (the mean
-        fluid speed through the constriction) crosses half a fluid cell between solves."""
+        fluid speed through the constriction) crosses ``UPDATE_CELL_FRACTION`` (one) fluid cell
+        between solves."""
         u = self._open_channel_speed()
         if u > 0:
             # Checks (escapes, feed, clogs, stability) as often as a particle at the

@@ -62,6 +62,11 @@ def test_interval_study_points_are_the_cells_they_are_labelled_with(monkeypatch)
         sim._update_fluid(force=True)
         assert abs(sim.scene.fluid.update_interval - k) <= cells / 0.5, (cells, k)
     monkeypatch.undo()
+    # the current default is one of the points, and the escapee study's "auto"
+    sim = Simulation(load_scene(vani, ["run.realizations=1", 'fluid.workers=1']))
+    sim._update_fluid(force=True)
+    assert sim.scene.fluid.update_interval == conv.ESCAPEE_DEFAULTS["fluid.update_interval"]
+    assert sim.scene.fluid.update_interval in steps
     sim = Simulation(load_scene(vani, ["run.realizations=1", 'fluid.workers=1',
                                        f"fluid.update_interval={steps[-1]}"]))
     sim._update_fluid(force=True)          # would refuse an interval over half a diameter
