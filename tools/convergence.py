@@ -227,6 +227,14 @@ def _row(label, value, pt):
             *pt["ci"], pt["wall_s"], pt["wall_per_sim_s"]]
 
 
+def _mean_ci_columns(rows):
+    """Wall-s per realization-s, mean escapees and its interval bounds of
+    :func:`_row` rows (NaN where a point has no estimate), as float arrays."""
+    def col(i):
+        return np.array([np.nan if r[i] is None else r[i] for r in rows], dtype=float)
+    return col(9), col(5), col(6), col(7)
+
+
 ROW_HEADER = ["realizations_ok", "clogged", "unstable", "mean_escapees",
               "mean_escapees_ci_lo", "mean_escapees_ci_hi", "wall_s",
               "wall_s_per_realization_s"]
@@ -293,8 +301,9 @@ def interval_study(out, quick, realizations=None):
             diff, (lo, hi) = mean_difference(ref["escapees"], ref["clogged"],
                                              pt["escapees"], pt["clogged"])
         rows.append([cells, k] + _row(None, None, pt)[2:] + [diff, lo, hi])
-    csv_path = _write(out, "interval", ["cells_per_solve", "steps"] + ROW_HEADER
-                      + ["change_from_half_cell", "change_ci_lo", "change_ci_hi"], rows)
+    header = (["cells_per_solve", "steps"] + ROW_HEADER
+              + ["change_from_half_cell", "change_ci_lo", "change_ci_hi"])
+    csv_path = _write(out, "interval", header, rows)
     # the points up to the default pooled against the longer ones: is there a change
     # beyond the default that one point's sample is too small to show?
     from taichi_hsdem.simulation import UPDATE_CELL_FRACTION
@@ -302,7 +311,8 @@ def interval_study(out, quick, realizations=None):
     def pool(sel):
         return ([s for c, pt in zip(INTERVAL_CELLS, pts) if sel(c) for s in pt["escapees"]],
                 [k for c, pt in zip(INTERVAL_CELLS, pts) if sel(c) for k in pt["clogged"]])
-    upto, beyond = pool(lambda c: c <= UPDATE_CELL_FRACTION), pool(lambda c: c > UPDATE_CELL_FRACTION)
+    upto = pool(lambda c: c <= UPDATE_CELL_FRACTION)
+    beyond = pool(lambda c: c > UPDATE_CELL_FRACTION)
     pooled = None
     if upto[0] and beyond[0]:
         diff, (lo, hi) = mean_difference(upto[0], upto[1], beyond[0], beyond[1])
@@ -311,21 +321,16 @@ def interval_study(out, quick, realizations=None):
                   "realizations_beyond_default": len(beyond[0]),
                   "change_beyond_minus_up_to": diff, "change_ci95": [lo, hi]}
     (out / "interval.json").write_text(json.dumps(
-        {"points": [dict(zip(["cells_per_solve", "steps"] + ROW_HEADER
-                             + ["change_from_half_cell", "change_ci_lo", "change_ci_hi"], r))
-                    for r in rows], "pooled": pooled}, indent=1) + "\n")
+        {"points": [dict(zip(header, r)) for r in rows], "pooled": pooled}, indent=1) + "\n")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    xs = np.array([r[9] for r in rows], dtype=float)
-    ys = np.array([np.nan if r[5] is None else r[5] for r in rows], dtype=float)
-    lo = np.array([np.nan if r[6] is None else r[6] for r in rows], dtype=float)
-    hi = np.array([np.nan if r[7] is None else r[7] for r in rows], dtype=float)
+    xs, ys, lo, hi = _mean_ci_columns(rows)
     ax.errorbar(xs, ys, yerr=[ys - lo, hi - ys], fmt="o-", capsize=3)
     for x, y, r in zip(xs, ys, rows):
-        ax.annotate(f"{r[0]:g} cell{'' if r[0] == 1 else 's'} ({r[1]} steps)", (x, y), textcoords="offset points",
-                    xytext=(4, 4), fontsize=7)
+        ax.annotate(f"{r[0]:g} cell{'' if r[0] == 1 else 's'} ({r[1]} steps)", (x, y),
+                    textcoords="offset points", xytext=(4, 4), fontsize=7)
     ax.set_xscale("log")
     ax.set_xlabel("wall seconds per simulated realization-second")
     ax.set_ylabel("mean escapees before a clog <s> (95 % interval)")
@@ -371,10 +376,8 @@ def _escapee_chart(out, rows, n):
                     fmt="k*", ms=10, capsize=3, label="paper-like (dt 3.75e-7 s, 1e4 steps)")
     for k, (label, key, _) in enumerate(ESCAPEE_KNOBS):
         sel = sorted((r for r in rows if r[0] == key), key=lambda r: r[9])
-        xs = np.array([r[9] for r in sel]) * (1 + 0.02 * (k - 1.5))  # spread the default
-        ys = np.array([r[5] if r[5] is not None else np.nan for r in sel], dtype=float)
-        lo = np.array([r[6] if r[6] is not None else np.nan for r in sel], dtype=float)
-        hi = np.array([r[7] if r[7] is not None else np.nan for r in sel], dtype=float)
+        xs, ys, lo, hi = _mean_ci_columns(sel)
+        xs = xs * (1 + 0.02 * (k - 1.5))  # spread the default
         ax.errorbar(xs, ys, yerr=[ys - lo, hi - ys], fmt="o-", capsize=3, label=label)
         for x, y, r in zip(xs, ys, sel):
             tag = r[1] if r[1] != _knob_value(key, ESCAPEE_DEFAULTS[key]) else "auto"
