@@ -20,7 +20,13 @@ into ``--out`` (default ``runs/figures/<command>/``):
     (``escapees-time``) escapees over time per realization beside the theory
     line ``4 phi Q t / (H pi d^2)``;
 ``figure.json``
-    the command line, the overrides of every point, wall times.
+    the command line, the overrides of every point, wall times;
+``points/<point>.json``
+    each point's realizations as soon as the point has finished. A later run
+    into the same ``--out`` reads a point back instead of running it when its
+    scene (seeds included), realization count and the package code are the
+    same (``--no-resume`` runs everything again), so an interrupted figure loses
+    at most the point it was running.
 
 Commands
 --------
@@ -79,8 +85,10 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import json
 import math
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -774,6 +782,45 @@ def _point_row(command: str, run: PointRun) -> dict:
     return row
 
 
+def _point_key(point: Point, realizations: int) -> str:
+    """What makes a finished point reusable: its scene (TOML text, seeds included),
+    the realization count and the package code (:func:`taichi_hsdem.sweep.code_digest`).
+    The batch size is left out: a realization does not depend on those beside it."""
+    from .scene import scene_to_toml
+    from .sweep import code_digest
+    text = (scene_to_toml(point.scene) + f"\n# realizations {int(realizations)}"
+            f"\n# code {code_digest()}")
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def point_file(out: Path, point: Point) -> Path:
+    """Where a finished point is kept: ``<out>/points/<label>.json``."""
+    return Path(out) / "points" / (re.sub(r"[^A-Za-z0-9._=+-]+", "_", point.label) + ".json")
+
+
+def _save_point(path: Path, key: str, run: PointRun) -> None:
+    data = {"key": key, "label": run.point.label, "wall_s": run.wall, "info": run.info,
+            "rows": run.rows, "series": [list(x) for x in run.series]}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(json.dumps(_jsonable(data)) + "\n")
+    tmp.replace(path)
+
+
+def _load_point(path: Path, key: str, point: Point) -> PointRun | None:
+    """The finished run of ``point`` kept at ``path``, or None (absent, unreadable,
+    or of another scene, realization count or code)."""
+    try:
+        data = json.loads(path.read_text())
+        if data.get("key") != key:
+            return None
+        return PointRun(point, rows=list(data["rows"]),
+                        series=[(int(a), float(b), int(c)) for a, b, c in data["series"]],
+                        wall=float(data["wall_s"]), info=dict(data["info"]))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def _opts_from_args(command, args) -> dict:
     opts = {}
     for key in ("phi", "mu", "ratios", "vertices", "ratio"):
@@ -786,8 +833,13 @@ def _opts_from_args(command, args) -> dict:
 
 
 def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(),
-               scene=None, seed=None, batch=None, opts=None, log=None, argv=None) -> dict:
+               scene=None, seed=None, batch=None, opts=None, log=None, argv=None,
+               resume=True) -> dict:
     """Run one figure; returns ``{"out", "files", "points", "runs"}``.
+
+    Every finished point is kept in ``<out>/points/``; with ``resume`` a point kept
+    there from the same scene, realization count and code is read back instead of
+    run again, so an interrupted figure restarts where it stopped.
 
     Raises :class:`FigureError` for invalid scenes or arguments before anything runs.
     """
@@ -829,8 +881,17 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
     t0 = time.perf_counter()
     runs, rows = [], []
     for k, p in enumerate(points):
-        say(f"[{k + 1}/{len(points)}] {p.label} ...")
-        run = run_point(p, int(realizations), batch, log=say)
+        key = _point_key(p, realizations)
+        kept = _load_point(point_file(out, p), key, p) if resume else None
+        if kept is not None:
+            say(f"[{k + 1}/{len(points)}] {p.label}: finished earlier, read from "
+                f"{point_file(out, p)}")
+            run = kept
+        else:
+            say(f"[{k + 1}/{len(points)}] {p.label} ...")
+            run = run_point(p, int(realizations), batch, log=say)
+            if not run.error:
+                _save_point(point_file(out, p), key, run)
         row = _point_row(command, run)
         runs.append(run)
         rows.append(row)
@@ -907,6 +968,10 @@ def _parser() -> argparse.ArgumentParser:
     common.add_argument("--batch", type=int, metavar="B",
                         help="realizations run together per simulation (default: all)")
     common.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    common.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
+                        help="read back points finished earlier in --out/points/ (same "
+                             "scene, realizations and code) instead of running them again "
+                             "(default: --resume)")
     p = argparse.ArgumentParser(prog="python tools/figures.py",
                                 description="The clogging figures of Zhou et al. (2024), "
                                             "Figs. 8-13: PNG, CSV of the numbers, figure.json.")
@@ -946,7 +1011,7 @@ def main(argv=None) -> int:
         res = run_figure(args.figure, quick=args.quick, realizations=args.realizations,
                          out=args.out, sets=args.set, scene=args.scene, seed=args.seed,
                          batch=args.batch, opts=_opts_from_args(args.figure, args), log=log,
-                         argv=argv)
+                         argv=argv, resume=args.resume)
     except FigureError as exc:
         for line in exc.problems:
             print(line, file=sys.stderr)

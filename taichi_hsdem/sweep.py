@@ -9,7 +9,8 @@ points. Every point writes its own folder, named after its overrides
 clogging statistics of every point, one row each) and ``index.json`` (folder ->
 overrides). A sweep is resumable: a point whose folder holds a ``summary.json``
 of the same scene (base file, common and point overrides, compared as the
-validated scene text) is skipped; a folder without one is run again.
+validated scene text) run by the same code (a digest of the package's sources) is
+skipped; a folder without one, or with another scene's or code's, is run again.
 
 A sweep file (TOML)::
 
@@ -286,9 +287,23 @@ def _check_points(scene_path, points, common, label) -> list[Scene]:
 
 # ---------------------------------------------------------------------------- runs
 
+def code_digest() -> str:
+    """SHA-256 of the package's Python sources (file names and contents, sorted).
+
+    Part of every resume key: a finished point computed by other code (a changed
+    ``auto`` rule, a fixed bug) is run again rather than passed off as current.
+    """
+    h = hashlib.sha256()
+    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 def _scene_key(scene: Scene) -> str:
-    """What makes two points the same run: the validated scene, as TOML text."""
-    return hashlib.sha256(scene_to_toml(scene).encode()).hexdigest()
+    """What makes two points the same run: the validated scene, as TOML text, and
+    the code that runs it (:func:`code_digest`)."""
+    return hashlib.sha256((scene_to_toml(scene) + "\n# code " + code_digest()).encode()
+                          ).hexdigest()
 
 
 def _finished_summary(folder: Path, key: str) -> dict | None:

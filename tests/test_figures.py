@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichi_hsdem import figures, stats
+from taichi_hsdem import figures, stats, sweep
 
 pytest.importorskip("matplotlib")
 
@@ -181,10 +181,11 @@ def test_every_figure_renders(command, tmp_path):
 
 # ------------------------------------------------------------------ one quick command
 
-def test_escapees_time_quick(tmp_path, capsys):
+def test_escapees_time_quick(tmp_path, capsys, monkeypatch):
     out = tmp_path / "fig8"
-    rc = figures.main(["escapees-time", "--quick", "--phi", "0.26", "--realizations", "2",
-                       "--set", "run.t_end=0.3", "--out", str(out), "--quiet"])
+    args = ["escapees-time", "--quick", "--phi", "0.26", "--set", "run.t_end=0.3",
+            "--out", str(out), "--quiet"]
+    rc = figures.main(args + ["--realizations", "2"])
     assert rc == 0
     printed = capsys.readouterr().out
     assert "phi=0.26:" in printed and f"wrote {out}" in printed
@@ -233,6 +234,36 @@ def test_escapees_time_quick(tmp_path, capsys):
         assert float(pt["rate_ratio"]) == pytest.approx(float(pt["rate"]) / float(pt["theory_rate"]))
     else:
         assert math.isnan(float(pt["rate"]))
+
+    # Resumable: the finished point was kept, and the same command reads it back
+    # instead of running it (the outputs come out the same) ...
+    assert (out / "points" / "phi=0.26.json").is_file()
+    written = {n: (out / n).read_text() for n in ("points.csv", "realizations.csv",
+                                                   "series.csv")}
+
+    class Ran(Exception):
+        pass
+
+    def ran(*args, **kwargs):
+        raise Ran
+
+    monkeypatch.setattr(figures, "run_point", ran)
+    assert figures.main(args + ["--realizations", "2"]) == 0
+    for name, text in written.items():
+        if name == "points.csv":    # the same but for the figure's own wall time
+            text = text.replace(pt["wall_s"], "")
+            assert (out / name).read_text().replace(pt["wall_s"], "") == text
+        else:
+            assert (out / name).read_text() == text, name
+    # ... but runs it again for another realization count, on request, or when the
+    # package code changed (a new default, a fixed bug)
+    with pytest.raises(Ran):
+        figures.main(args + ["--realizations", "3"])
+    with pytest.raises(Ran):
+        figures.main(args + ["--realizations", "2", "--no-resume"])
+    monkeypatch.setattr(sweep, "code_digest", lambda: "0" * 64)
+    with pytest.raises(Ran):
+        figures.main(args + ["--realizations", "2"])
 
 
 # ------------------------------------------------------------------ the others (slow)

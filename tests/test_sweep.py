@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import taichi_hsdem.sweep as sweep_module
 from taichi_hsdem.sweep import (SweepError, calibrate, expand_grid, load_sweep,
                                 point_folder, run_sweep)
 
@@ -105,7 +106,7 @@ scene = "{HOURGLASS.as_posix()}"
 
 # ------------------------------------------------------------------ running, resume
 
-def test_sweep_writes_folders_and_table_then_resumes(tmp_path, capsys):
+def test_sweep_writes_folders_and_table_then_resumes(tmp_path, capsys, monkeypatch):
     out = tmp_path / "sweep"
     points = [{"particles.friction": 0.2}, {"particles.friction": 0.4}]
     sweep_file = tmp_path / "s.toml"
@@ -161,6 +162,13 @@ def test_sweep_writes_folders_and_table_then_resumes(tmp_path, capsys):
     # ... and resume=False runs a finished point again
     assert run_sweep(HOURGLASS, points[:1], out, common={"run.t_end": 0.2},
                      resume=False)[0]["status"] == "ran"
+    assert run_sweep(HOURGLASS, points[:1], out,
+                     common={"run.t_end": 0.2})[0]["status"] == "skipped"
+    # ... and so does other package code (a changed default must not pass stale
+    # results off as current)
+    monkeypatch.setattr(sweep_module, "code_digest", lambda: "0" * 64)
+    assert run_sweep(HOURGLASS, points[:1], out,
+                     common={"run.t_end": 0.2})[0]["status"] == "ran"
 
 
 def test_run_sweep_refuses_bad_points_before_running(tmp_path):

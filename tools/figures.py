@@ -10,7 +10,8 @@ Usage::
     python tools/figures.py polygons      [...] [--vertices 3 4 5 6] [--ratio 1.2]
 
 Each writes ``<figure>.png``, ``points.csv``, ``realizations.csv``, ``pmf.csv`` or
-``series.csv`` and ``figure.json`` to ``--out`` (default ``runs/figures/<figure>/``),
+``series.csv``, ``figure.json`` and ``points/`` (each finished point, read back by a
+rerun into the same ``--out``: resumable) to ``--out`` (default ``runs/figures/<figure>/``),
 prints one line per point and where it wrote. ``--realizations 100`` is the paper's
 sample size; ``--quick`` a smoke test for CI. Details: ``taichi_hsdem/figures.py``.
 """
