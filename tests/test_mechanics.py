@@ -195,6 +195,51 @@ def face_overlap(nodes, normalize, load=10.0):
     return 0.5 - st["x"][0, 0, 1]                # how deep the face sits in the floor
 
 
+def _node_law_disks():
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "tools" / "convergence.py"
+    spec = importlib.util.spec_from_file_location("convergence_tool", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.node_law_disks
+
+
+def test_node_law_reference_tends_to_the_lens_limit():
+    # The reference below, on its own: with many nodes the normalised law is kn
+    # times the mean depth over the overlapped arc, which for a shallow overlap is a
+    # parabolic lens, 2/3 of delta (cos of the normal's tilt -> 1); summed, it is
+    # nodes / (2 pi) times the area-like integral 2 * (2/3) delta * 2 sqrt(r delta) / r.
+    law = _node_law_disks()
+    assert law(400_000, 1e-4, 0.3, True) == pytest.approx(2.0 / 3.0, rel=2e-3)
+    half_arc = math.sqrt(0.5 * 1e-4) / 0.5             # sqrt(r delta) / r, r = 0.5
+    summed = 400_000 / (2 * math.pi) * (2.0 / 3.0) * 2 * half_arc
+    assert law(400_000, 1e-4, 0.3, False) == pytest.approx(summed, rel=5e-3)
+
+
+@pytest.mark.parametrize("normalize", [True, False])
+def test_level_set_disk_pair_force_is_the_node_law_on_the_exact_distance(normalize):
+    # Two level-set disks (40 nodes) pressed 0.02 d together at several angles to
+    # their nodes: the force must be the node law evaluated with the exact signed
+    # distance (an independent numpy sum), up to the grid's interpolation error.
+    # Bilinear interpolation of a distance field of curvature 1/r errs by at most
+    # h^2 / (8 r) = 4e-5 d at h = d/80, 0.2 % of the 0.02 d depth (measured 0.19 %
+    # by tools/convergence.py contact); allowed: 1 %.
+    law = _node_law_disks()
+    kn, depth = 1.0e4, 0.02
+    sim = make_sim(arena_scene([dict(DISK, nodes=40, ls_spacing=1 / 80)], kn=kn,
+                               fast_path=False, normalize=normalize))
+    for a in (0.1, 0.9, 2.3, 4.0):
+        c = np.array([10.0, 5.0])
+        u = np.array([math.cos(a), math.sin(a)])
+        sim.set_state([[c, c + (1.0 - depth) * u]])
+        sim.step(1)
+        f, _ = sim.forces()
+        assert -f[0, 0] @ u / (kn * depth) == pytest.approx(law(40, depth, a, normalize),
+                                                             rel=0.01)
+        assert f[0, 0] @ u == pytest.approx(-(f[0, 1] @ u), rel=1e-9)   # action, reaction
+
+
 def test_normalisation_makes_contact_stiffness_independent_of_node_count():
     # Paper's choice (normalize): a face pressed with F sinks F / kn whatever the
     # node count. Without it every node on the face adds kn in parallel, so the
