@@ -20,7 +20,9 @@ into ``--out`` (default ``runs/figures/<command>/``):
     (``escapees-time``) escapees over time per realization beside the theory
     line ``4 phi Q t / (H pi d^2)``;
 ``figure.json``
-    the command line, the overrides of every point, wall times;
+    the command line, the overrides of every point, wall times (``wall_time_s``
+    this invocation's, a point's ``wall_s`` the run that computed it, ``resumed``
+    whether it was read back);
 ``points/<point>.json``
     each point's realizations as soon as the point has finished. A later run
     into the same ``--out`` reads a point back instead of running it when its
@@ -163,6 +165,7 @@ class PointRun:
     wall: float = 0.0
     info: dict = field(default_factory=dict)
     error: str | None = None
+    resumed: bool = False                           # read back from <out>/points/
 
     @property
     def ok_rows(self):
@@ -528,10 +531,15 @@ def summary_line(command: str, run: PointRun, row: dict) -> str:
     if command == "escapees-time":
         return (f"{head}, first escape at {row['t_first_mean']:.3g} s (mean), rate "
                 f"{row['rate']:.3g} +- {row['rate_stderr']:.2g} /s vs theory "
-                f"{row['theory_rate']:.3g} /s (ratio {row['rate_ratio']:.2f}), {run.wall:.1f} s")
+                f"{row['theory_rate']:.3g} /s (ratio {row['rate_ratio']:.2f}), {run.wall:.1f} s"
+                f"{_kept(run)}")
     return (f"{head}, <s> = {_interval_text(row['mean_s'], row['mean_s_lo'], row['mean_s_hi'])}, "
             f"lambda = {_interval_text(row['decay_rate'], row['decay_rate_lo'], row['decay_rate_hi'])}"
-            f" /escapee, {run.wall:.1f} s")
+            f" /escapee, {run.wall:.1f} s{_kept(run)}")
+
+
+def _kept(run: PointRun) -> str:
+    return " (finished earlier, read back)" if run.resumed else ""
 
 
 # ----------------------------------------------------------------------------- plots
@@ -807,17 +815,23 @@ def _save_point(path: Path, key: str, run: PointRun) -> None:
     tmp.replace(path)
 
 
+_ROW_KEYS = ("seed", "escapees", "clogged", "t_clog", "t_stop", "status", "reason")
+
+
 def _load_point(path: Path, key: str, point: Point) -> PointRun | None:
     """The finished run of ``point`` kept at ``path``, or None (absent, unreadable,
-    or of another scene, realization count or code)."""
+    malformed, or of another scene, realization count or code)."""
     try:
         data = json.loads(path.read_text())
-        if data.get("key") != key:
+        if not isinstance(data, dict) or data.get("key") != key:
             return None
-        return PointRun(point, rows=list(data["rows"]),
+        rows = data["rows"]
+        if not all(isinstance(r, dict) and all(k in r for k in _ROW_KEYS) for r in rows):
+            return None
+        return PointRun(point, rows=list(rows),
                         series=[(int(a), float(b), int(c)) for a, b, c in data["series"]],
-                        wall=float(data["wall_s"]), info=dict(data["info"]))
-    except (OSError, ValueError, KeyError, TypeError):
+                        wall=float(data["wall_s"]), info=dict(data["info"]), resumed=True)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
 
 
@@ -874,7 +888,15 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
     except SceneError as exc:
         raise FigureError(exc.problems) from None
     out = Path(out) if out else Path("runs") / "figures" / command
+    files_of = {}
+    for p in points:
+        other = files_of.setdefault(point_file(out, p).name, p.label)
+        if other != p.label or sum(q.label == p.label for q in points) > 1:
+            raise FigureError(f"points {other!r} and {p.label!r} would share "
+                              f"{point_file(out, p).name}: give distinct values")
     out.mkdir(parents=True, exist_ok=True)
+    from .sweep import code_digest
+    code_digest()                  # this process's code, before any point runs
     say = log or (lambda msg: None)
     say(f"{command}: {len(points)} point(s) x {realizations} realization(s), t_end = "
         f"{base.run.t_end:g} s{' (quick)' if quick else ''} -> {out}")
@@ -943,7 +965,8 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
             "wall_time_s": wall,
             "points": [{"label": r.point.label, "values": r.point.values,
                         "overrides": {k: v for k, v in r.point.overrides.items()},
-                        "wall_s": r.wall, "error": r.error, "info": r.info} for r in runs]}
+                        "wall_s": r.wall, "error": r.error, "info": r.info,
+                        "resumed": r.resumed} for r in runs]}
     tmp = out / "figure.json.part"
     tmp.write_text(json.dumps(_jsonable(info), indent=1, allow_nan=False) + "\n")
     tmp.replace(out / "figure.json")

@@ -287,16 +287,36 @@ def _check_points(scene_path, points, common, label) -> list[Scene]:
 
 # ---------------------------------------------------------------------------- runs
 
+_CODE_DIGEST: str | None = None
+
+
 def code_digest() -> str:
-    """SHA-256 of the package's Python sources (file names and contents, sorted).
+    """SHA-256 of the package's Python sources (file names and contents, sorted)
+    and of the versions of the libraries that compute a result (Taichi, NumPy,
+    SciPy, pyamg).
 
     Part of every resume key: a finished point computed by other code (a changed
     ``auto`` rule, a fixed bug) is run again rather than passed off as current.
+    Deliberately the whole package, plotting included: a kept result also holds
+    statistics computed when it ran, and telling which edit can change a number
+    is not worth a stale figure. Read once per process, at the first call (the
+    sweep and figure commands call it before their first point), so that an edit
+    made while a long run goes on does not label the old code's results as new.
     """
-    h = hashlib.sha256()
-    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
-        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
-    return h.hexdigest()
+    global _CODE_DIGEST
+    if _CODE_DIGEST is None:
+        from importlib import metadata
+        h = hashlib.sha256()
+        for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+            h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+        for dist in ("taichi", "numpy", "scipy", "pyamg"):
+            try:
+                version = metadata.version(dist)
+            except metadata.PackageNotFoundError:
+                version = "absent"
+            h.update(f"{dist}=={version}\0".encode())
+        _CODE_DIGEST = h.hexdigest()
+    return _CODE_DIGEST
 
 
 def _scene_key(scene: Scene) -> str:
@@ -458,6 +478,7 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
                   for point, scene in zip(points, scenes)]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    code_digest()                  # this process's code, before any point runs
     say = progress or (lambda message: None)
     rows = []
     total = len(points)

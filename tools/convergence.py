@@ -129,16 +129,18 @@ def pressure_study(out, quick):
     return rows, csv_path, png
 
 
-def node_law_disks(nodes, depth, angle, normalize, diameter=1.0):
+def node_law_disks(nodes, depth, angle, normalize, diameter=1.0, turn=0.0):
     """The LS-DEM node law for two equal disks evaluated with the *exact* signed
-    distance (no level-set grid): ``F / (kn delta)`` on the first disk, along the
-    line of centres, at overlap ``delta = depth * diameter``.
+    distance (no level-set grid): ``(F / (kn delta), n_i, n_j)``, the force on the
+    first disk along the line of centres at overlap ``delta = depth * diameter``,
+    and how many nodes of each disk are in contact.
 
-    Disk ``i`` at the origin, ``j`` at ``(diameter - delta) (cos angle, sin angle)``,
-    both unrotated, ``nodes`` surface nodes each at angles ``2 pi k / nodes``. Each
-    direction (``i``'s nodes in ``j``, ``j``'s nodes in ``i``) sums ``-phi n`` over its
-    nodes in contact, divided by their number when ``normalize``; when both see the
-    contact the pair force is the mean (README, Model choices: Contact). With
+    Disk ``i`` at the origin, unrotated, ``j`` at ``(diameter - delta) (cos angle,
+    sin angle)`` turned by ``turn``, ``nodes`` surface nodes each at body angles
+    ``2 pi k / nodes``. Each direction (``i``'s nodes in ``j``, ``j``'s nodes in
+    ``i``) sums ``-phi n`` over its nodes in contact, divided by their number when
+    ``normalize``; when both see the contact the pair force is the mean (README,
+    Model choices: Contact). With
     ``nodes -> infinity`` and ``normalize`` this tends to the mean node depth over the
     overlapped arc, ``2/3`` of ``delta`` as ``delta -> 0`` (a parabolic lens): the
     law's own limit, which differs from the analytic disk's ``kn delta``.
@@ -148,22 +150,24 @@ def node_law_disks(nodes, depth, angle, normalize, diameter=1.0):
     u = np.array([np.cos(angle), np.sin(angle)])
     ci, cj = np.zeros(2), (diameter - delta) * u
     ang = 2.0 * np.pi * np.arange(nodes) / nodes
-    ring = r * np.stack([np.cos(ang), np.sin(ang)], axis=1)
 
-    def side(own, other):
-        p = own + ring
+    def ring(turn_):
+        return r * np.stack([np.cos(ang + turn_), np.sin(ang + turn_)], axis=1)
+
+    def side(own, other, turn_):
+        p = own + ring(turn_)
         dist = np.linalg.norm(p - other, axis=1)
         inside = dist < r
         f = ((r - dist[inside]) / dist[inside])[:, None] * (p[inside] - other)
         total = f.sum(axis=0)
         return (total / max(1, inside.sum()) if normalize else total), int(inside.sum())
 
-    fa, na = side(ci, cj)                 # nodes of i in j: force on i
-    fb, nb = side(cj, ci)                 # nodes of j in i: force on j, reaction on i
+    fa, na = side(ci, cj, 0.0)            # nodes of i in j: force on i
+    fb, nb = side(cj, ci, turn)           # nodes of j in i: force on j, reaction on i
     f_i = fa - fb
     if na and nb:
         f_i = 0.5 * f_i
-    return float(-f_i @ u / delta)
+    return float(-f_i @ u / delta), na, nb
 
 
 def contact_study(out, quick):
@@ -197,9 +201,10 @@ def contact_study(out, quick):
                 per_step = (time.perf_counter() - t0) / 200
                 ratios = np.array(ratios)
                 # the same nodes with the exact distance: what is left is grid error
-                exact = np.array([node_law_disks(nodes, depth, a, normalize) for a in angles])
+                exact = np.array([node_law_disks(nodes, depth, a, normalize)[0]
+                                  for a in angles])
                 # the law with nodes -> infinity (sums scale with the node count)
-                limit = node_law_disks(CONTINUUM_NODES, depth, 0.0, normalize) * \
+                limit = node_law_disks(CONTINUUM_NODES, depth, 0.0, normalize)[0] * \
                     (1.0 if normalize else nodes / CONTINUUM_NODES)
                 rows.append([normalize, nodes, h, float(np.mean(ratios)), float(np.std(ratios)),
                              float(np.mean(np.abs(ratios - 1.0))), per_step,

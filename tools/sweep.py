@@ -44,7 +44,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default runs/<sweep file name>/)")
     p.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
                    help="skip points whose folder holds a finished run of the same "
-                        "scene (default: --resume)")
+                        "scene by the same package code (default: --resume)")
     p.add_argument("--quick", action="store_true",
                    help="smoke test: 1/10 of run.t_end, <= 2 realizations, into OUT/quick/")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
