@@ -2,6 +2,7 @@
 
     python tools/convergence.py pressure [--quick] [--out DIR]
     python tools/convergence.py contact  [--quick] [--out DIR]
+    python tools/convergence.py timestep [--quick] [--out DIR]
     python tools/convergence.py escapees [--quick] [--out DIR] [--realizations N]
     python tools/convergence.py paper    [--quick] [--out DIR] [--realizations N]
     python tools/convergence.py interval [--quick] [--out DIR] [--realizations N]
@@ -10,6 +11,11 @@
 3 ... 12 fluid cells per smallest diameter against a 16-cell reference, sampled at
 the same points; error against the wall time of one solve (set-up + solve).
 (The exact-solution study is ``tools/inclusion_convergence.py``.)
+
+``timestep``: a head-on collision of two disks (analytic path, linear
+spring-dashpot) at restitution 0.3 ... 0.9 and time steps of 0.01 ... 0.5 of the
+critical step (``run.dt_safety``): the rebound ratio against the exact ``e``,
+error against the steps per unit time the setting costs (``1 / dt_safety``).
 
 ``contact``: the force of a level-set disk pressed into another by a fixed
 overlap, against the analytic disk's ``kn * delta``, as the surface-node count and
@@ -265,6 +271,41 @@ def _grid_chart(out, rows, spacings, depth):
     plt.close(fig)
 
 
+TIMESTEP_SAFETIES = (0.01, 0.02, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.5)
+TIMESTEP_RESTITUTIONS = (0.3, 0.5, 0.7, 0.9)
+
+
+def head_on_rebound(e, dt_safety):
+    """Two unit disks (kn 1e4, no fluid) meet head on at relative speed 2: the
+    rebound ratio, which the continuous spring-dashpot makes exactly ``e``."""
+    from conftest import arena_scene, make_sim
+    sim = make_sim(arena_scene([{"shape": "circle", "diameter": 1.0, "count": 2}],
+                               restitution=e, dt_safety=dt_safety))
+    sim.set_state([[[8.0, 5.0], [10.0, 5.0]]], v=[[[1.0, 0.0], [-1.0, 0.0]]])
+    sim.step(int(1.2 / sim.dt))          # approach (0.5), contact, separation
+    v = sim.state()["v"][0]
+    return (v[1, 0] - v[0, 0]) / 2.0
+
+
+def timestep_study(out, quick):
+    from taichi_hsdem import backend
+    backend.init("cpu", "f64")
+    safeties = (0.02, 0.15, 0.3) if quick else TIMESTEP_SAFETIES
+    rows = []
+    for s in safeties:
+        errs = [head_on_rebound(e, s) / e - 1.0 for e in TIMESTEP_RESTITUTIONS]
+        rows.append([s, 1.0 / s, *errs, float(np.max(np.abs(errs)))])
+    csv_path = _write(out, "timestep", ["dt_safety", "steps_per_critical_step",
+                                        *[f"rel_error_e{e:g}" for e in TIMESTEP_RESTITUTIONS],
+                                        "max_abs_rel_error"], rows)
+    png = _pareto(out, "timestep", [("max over e = " + ", ".join(
+        f"{e:g}" for e in TIMESTEP_RESTITUTIONS), [r[1] for r in rows],
+        [max(r[-1], 1e-6) for r in rows], [r[0] for r in rows])],
+        "steps per critical time step (cost, 1 / dt_safety)",
+        "max |rebound ratio / e - 1|", "head-on disk collision (labels: dt_safety)")
+    return rows, csv_path, png
+
+
 # The escapee study's knobs: (label, override key, values off the default). The
 # vani scene's auto values: dt_safety 0.15, overlap_target 0.02, update_interval
 # 328 steps (one cell at the constriction's mean speed), cell_size d/6.
@@ -491,7 +532,8 @@ def _escapee_chart(out, rows, n):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("study", choices=("pressure", "contact", "escapees", "paper", "interval"))
+    p.add_argument("study", choices=("pressure", "contact", "timestep", "escapees", "paper",
+                                      "interval"))
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default=str(ROOT / "runs" / "convergence"))
     p.add_argument("--realizations", type=int, default=None,
@@ -506,7 +548,8 @@ def main(argv=None):
     elif a.study == "interval":
         rows, csv_path, png = interval_study(Path(a.out), a.quick, a.realizations)
     else:
-        study = {"pressure": pressure_study, "contact": contact_study}[a.study]
+        study = {"pressure": pressure_study, "contact": contact_study,
+                 "timestep": timestep_study}[a.study]
         rows, csv_path, png = study(Path(a.out), a.quick)
     for r in rows:
         print(", ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in r))
