@@ -83,3 +83,23 @@ def test_timestep_study_quick_writes_its_chart(tmp_path):
     assert rows[0][-1] < 0.01
     for r in rows:
         assert r[-1] == max(abs(v) for v in r[2:-1])
+
+
+def test_escape_windows_pool_escapes_over_unclogged_time(tmp_path):
+    # Two realizations at phi 0.1: seed 0 escapes at t = 0.5, 1.5, 2.5 and never
+    # clogs (runs to 3 s); seed 1 escapes at 0.2 and clogs at 1.0. Window [0, 2]:
+    # escapes 2 (seed 0) + 1 (seed 1) over 2 + 1 unclogged seconds = 1 per s.
+    (tmp_path / "series.csv").write_text(
+        "phi,seed,t,escapees,theory_escapees\n"
+        "0.1,0,0.0,0,0.0\n0.1,0,0.5,1,0.25\n0.1,0,1.5,2,0.75\n0.1,0,2.5,3,1.25\n"
+        "0.1,0,3.0,3,1.5\n0.1,1,0.0,0,0.0\n0.1,1,0.2,1,0.1\n0.1,1,1.0,1,0.5\n")
+    (tmp_path / "realizations.csv").write_text(
+        "label,phi,seed,escapees,clogged,t_clog,t_stop,status,reason\n"
+        "a,0.1,0,3,0,,3.0,ok,\na,0.1,1,1,1,1.0,1.0,ok,\n")
+    tool = _load("escape_windows")
+    (row,) = tool.windows_table(tmp_path, [(0.0, 2.0)])
+    assert row[:5] == (0.1, 0.0, 2.0, 3, 3.0)
+    assert row[5] == 1.0 and row[6] == 0.5          # theory: 0.25 escapees at 0.5 s
+    (late,) = tool.windows_table(tmp_path, [(1.0, 3.0)])
+    assert late[3:5] == (2, 2.0)                    # seed 1 has clogged by then
+    assert tool.main([str(tmp_path), "--windows", "2:1"]) == 2
