@@ -888,12 +888,13 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
     except SceneError as exc:
         raise FigureError(exc.problems) from None
     out = Path(out) if out else Path("runs") / "figures" / command
-    files_of = {}
-    for p in points:
-        other = files_of.setdefault(point_file(out, p).name, p.label)
-        if other != p.label or sum(q.label == p.label for q in points) > 1:
-            raise FigureError(f"points {other!r} and {p.label!r} would share "
-                              f"{point_file(out, p).name}: give distinct values")
+    kept_files = [point_file(out, p) for p in points]
+    owner = {}
+    for p, path in zip(points, kept_files):
+        if path.name in owner:
+            raise FigureError(f"points {owner[path.name]!r} and {p.label!r} would share "
+                              f"{path.name}: give distinct values")
+        owner[path.name] = p.label
     out.mkdir(parents=True, exist_ok=True)
     from .sweep import code_digest
     code_digest()                  # this process's code, before any point runs
@@ -902,18 +903,17 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
         f"{base.run.t_end:g} s{' (quick)' if quick else ''} -> {out}")
     t0 = time.perf_counter()
     runs, rows = [], []
-    for k, p in enumerate(points):
+    for k, (p, path) in enumerate(zip(points, kept_files)):
         key = _point_key(p, realizations)
-        kept = _load_point(point_file(out, p), key, p) if resume else None
+        kept = _load_point(path, key, p) if resume else None
         if kept is not None:
-            say(f"[{k + 1}/{len(points)}] {p.label}: finished earlier, read from "
-                f"{point_file(out, p)}")
+            say(f"[{k + 1}/{len(points)}] {p.label}: finished earlier, read from {path}")
             run = kept
         else:
             say(f"[{k + 1}/{len(points)}] {p.label} ...")
             run = run_point(p, int(realizations), batch, log=say)
             if not run.error:
-                _save_point(point_file(out, p), key, run)
+                _save_point(path, key, run)
         row = _point_row(command, run)
         runs.append(run)
         rows.append(row)

@@ -4,19 +4,10 @@ import math
 import numpy as np
 import pytest
 
-from conftest import arena_scene, make_sim
+from conftest import arena_scene, head_on, make_sim
 from taichi_hsdem import SceneError, Simulation, load_scene
 
 DISK = {"shape": "circle", "diameter": 1.0, "count": 2}
-
-
-def head_on(e, fast_path=True, dt_safety=0.02, nodes=40):
-    sim = make_sim(arena_scene([dict(DISK, nodes=nodes)], restitution=e, fast_path=fast_path,
-                               dt_safety=dt_safety))
-    sim.set_state([[[8.0, 5.0], [10.0, 5.0]]], v=[[[1.0, 0.0], [-1.0, 0.0]]])
-    sim.step(int(1.2 / sim.dt))          # approach (0.5), contact, separation
-    v = sim.state()["v"][0]
-    return (v[1, 0] - v[0, 0]) / 2.0, v
 
 
 @pytest.mark.parametrize("e", [0.3, 0.6, 0.9])

@@ -146,10 +146,10 @@ def node_law_disks(nodes, depth, angle, normalize, diameter=1.0, turn=0.0):
     ``2 pi k / nodes``. Each direction (``i``'s nodes in ``j``, ``j``'s nodes in
     ``i``) sums ``-phi n`` over its nodes in contact, divided by their number when
     ``normalize``; when both see the contact the pair force is the mean (README,
-    Model choices: Contact). With
-    ``nodes -> infinity`` and ``normalize`` this tends to the mean node depth over the
-    overlapped arc, ``2/3`` of ``delta`` as ``delta -> 0`` (a parabolic lens): the
-    law's own limit, which differs from the analytic disk's ``kn delta``.
+    Model choices: Contact). With ``nodes -> infinity`` and ``normalize`` this tends
+    to the mean node depth over the overlapped arc, ``2/3`` of ``delta`` as
+    ``delta -> 0`` (a parabolic lens): the law's own limit, which differs from the
+    analytic disk's ``kn delta``.
     """
     r = 0.5 * diameter
     delta = depth * diameter
@@ -187,7 +187,12 @@ def contact_study(out, quick):
     rng = np.random.default_rng(0)
     angles = rng.uniform(0, 2 * np.pi, 8)      # contact directions relative to the nodes
     for normalize in (True, False):
+        # the law with nodes -> infinity (a sum scales with the node count)
+        limit_all = node_law_disks(CONTINUUM_NODES, depth, 0.0, normalize)[0]
         for nodes in nodes_list:
+            # the same nodes with the exact distance: what is left is grid error
+            exact = np.array([node_law_disks(nodes, depth, a, normalize)[0] for a in angles])
+            limit = limit_all * (1.0 if normalize else nodes / CONTINUUM_NODES)
             for h in spacings:
                 ratios = []
                 sim = make_sim(arena_scene([{"shape": "circle", "diameter": 1.0, "count": 2,
@@ -206,12 +211,6 @@ def contact_study(out, quick):
                 sim.step(200)
                 per_step = (time.perf_counter() - t0) / 200
                 ratios = np.array(ratios)
-                # the same nodes with the exact distance: what is left is grid error
-                exact = np.array([node_law_disks(nodes, depth, a, normalize)[0]
-                                  for a in angles])
-                # the law with nodes -> infinity (sums scale with the node count)
-                limit = node_law_disks(CONTINUUM_NODES, depth, 0.0, normalize)[0] * \
-                    (1.0 if normalize else nodes / CONTINUUM_NODES)
                 rows.append([normalize, nodes, h, float(np.mean(ratios)), float(np.std(ratios)),
                              float(np.mean(np.abs(ratios - 1.0))), per_step,
                              float(np.mean(exact)), _rel_error(ratios, exact),
@@ -233,7 +232,15 @@ def contact_study(out, quick):
     png = _pareto(out, "contact", series, "wall time of one step, 2 disks (s)",
                   "mean |F_ls / F_ref - 1|",
                   f"level-set disk at overlap {depth} d (labels: nodes)")
-    _grid_chart(out, rows, spacings, depth)
+    # the level-set grid's own error (against the same nodes on the exact distance)
+    grid = []
+    for n in nodes_list:
+        sel = sorted((r for r in rows if r[0] and r[1] == n), key=lambda r: r[2])
+        grid.append((f"{n} nodes", [1.0 / r[2] for r in sel], [max(r[8], 1e-7) for r in sel],
+                     [""] * len(sel)))
+    _pareto(out, "contact-grid", grid, "level-set cells per diameter (d / h)",
+            "mean |F_ls / F_exact distance - 1|",
+            f"level-set grid error, disk pair at overlap {depth} d (normalize=True)")
     return rows, csv_path, png
 
 
@@ -249,51 +256,18 @@ def _rel_error(values, refs):
 CONTINUUM_NODES = 100_000     # node_law_disks at this count stands for nodes -> infinity
 
 
-def _grid_chart(out, rows, spacings, depth):
-    """``contact-grid.png``: the level-set grid's own error (the simulator against
-    the same nodes with the exact distance) against the grid spacing."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6, 4.2))
-    for nodes in sorted({r[1] for r in rows}):
-        sel = sorted((r for r in rows if r[0] and r[1] == nodes), key=lambda r: r[2])
-        ax.loglog([1.0 / r[2] for r in sel], [max(r[8], 1e-7) for r in sel], "o-",
-                  label=f"{nodes} nodes")
-    ax.set_xlabel("level-set cells per diameter (d / h)")
-    ax.set_ylabel("mean |F_ls / F_exact distance - 1|")
-    ax.set_title(f"level-set grid error, disk pair at overlap {depth} d (normalize=True)",
-                 fontsize=9)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "contact-grid.png", dpi=120)
-    plt.close(fig)
-
-
 TIMESTEP_SAFETIES = (0.01, 0.02, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.5)
 TIMESTEP_RESTITUTIONS = (0.3, 0.5, 0.7, 0.9)
 
 
-def head_on_rebound(e, dt_safety):
-    """Two unit disks (kn 1e4, no fluid) meet head on at relative speed 2: the
-    rebound ratio, which the continuous spring-dashpot makes exactly ``e``."""
-    from conftest import arena_scene, make_sim
-    sim = make_sim(arena_scene([{"shape": "circle", "diameter": 1.0, "count": 2}],
-                               restitution=e, dt_safety=dt_safety))
-    sim.set_state([[[8.0, 5.0], [10.0, 5.0]]], v=[[[1.0, 0.0], [-1.0, 0.0]]])
-    sim.step(int(1.2 / sim.dt))          # approach (0.5), contact, separation
-    v = sim.state()["v"][0]
-    return (v[1, 0] - v[0, 0]) / 2.0
-
-
 def timestep_study(out, quick):
+    from conftest import head_on           # the collision tests/test_mechanics.py checks
     from taichi_hsdem import backend
     backend.init("cpu", "f64")
     safeties = (0.02, 0.15, 0.3) if quick else TIMESTEP_SAFETIES
     rows = []
     for s in safeties:
-        errs = [head_on_rebound(e, s) / e - 1.0 for e in TIMESTEP_RESTITUTIONS]
+        errs = [head_on(e, dt_safety=s)[0] / e - 1.0 for e in TIMESTEP_RESTITUTIONS]
         rows.append([s, 1.0 / s, *errs, float(np.max(np.abs(errs)))])
     csv_path = _write(out, "timestep", ["dt_safety", "steps_per_critical_step",
                                         *[f"rel_error_e{e:g}" for e in TIMESTEP_RESTITUTIONS],

@@ -34,24 +34,26 @@ def windows_table(folder, windows):
             continue
         clogged = r["clogged"] in ("1", "True", "true")
         ends[(r["phi"], int(r["seed"]))] = float(r["t_clog"]) if clogged else float(r["t_stop"])
+    # per stable realization: sample times, counts, and when it stopped counting
+    runs = {}
+    for key, pts in series.items():
+        if key in ends:
+            pts.sort()
+            runs[key] = ([p[0] for p in pts], [p[1] for p in pts], ends[key])
+
+    def count_at(times, counts, t):
+        k = bisect.bisect_right(times, t) - 1
+        return counts[k] if k >= 0 else 0
+
     rows = []
     for phi in sorted(theory, key=float):
         for t0, t1 in windows:
             events, duration = 0, 0.0
-            for key, pts in series.items():
-                if key[0] != phi or key not in ends:
+            for key, (times, counts, stop) in runs.items():
+                end = min(t1, stop)
+                if key[0] != phi or end <= t0:
                     continue
-                pts.sort()
-                times = [p[0] for p in pts]
-
-                def count_at(t):
-                    k = bisect.bisect_right(times, t) - 1
-                    return pts[k][1] if k >= 0 else 0
-
-                end = min(t1, ends[key])
-                if end <= t0:
-                    continue
-                events += count_at(end) - count_at(t0)
+                events += count_at(times, counts, end) - count_at(times, counts, t0)
                 duration += end - t0
             rate = events / duration if duration > 0 else float("nan")
             rows.append((float(phi), t0, t1, events, duration, rate, theory[phi]))

@@ -20,8 +20,9 @@ Each point writes ``DIR/<overrides>/`` (summary.json, escapees.csv,
 scene.resolved.toml); the sweep writes ``DIR/sweep.csv`` (one row of clogging
 statistics per point) and ``DIR/index.json`` (folder -> overrides). With
 ``--resume`` (the default) a point whose folder already holds the summary of the
-same scene, run by the same package code, is skipped. ``--quick`` runs each point for a tenth of its
-``run.t_end`` with at most two realizations, into ``DIR/quick/``.
+same scene, run by the same package code, is skipped. ``--quick`` runs each point
+for a tenth of its ``run.t_end`` with at most two realizations, into
+``DIR/quick/``.
 
 Exit status: 0 every point has its results; 1 a point failed or a realization went
 unstable (the other points are written); 2 the sweep file or a point is invalid
