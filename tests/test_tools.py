@@ -103,3 +103,5 @@ def test_escape_windows_pool_escapes_over_unclogged_time(tmp_path):
     (late,) = tool.windows_table(tmp_path, [(1.0, 3.0)])
     assert late[3:5] == (2, 2.0)                    # seed 1 has clogged by then
     assert tool.main([str(tmp_path), "--windows", "2:1"]) == 2
+    (tmp_path / "realizations.csv").unlink()
+    assert tool.main([str(tmp_path)]) == 2               # a folder without its table

@@ -74,9 +74,10 @@ def main(argv=None):
         print(f"--windows: expected t0:t1 pairs with 0 <= t0 < t1, got {a.windows!r}",
               file=sys.stderr)
         return 2
-    if not (Path(a.folder) / "series.csv").is_file():
-        print(f"{a.folder}: no series.csv (run tools/figures.py escapees-time first)",
-              file=sys.stderr)
+    missing = [n for n in ("series.csv", "realizations.csv") if not (Path(a.folder) / n).is_file()]
+    if missing:
+        print(f"{a.folder}: no {' or '.join(missing)} (run tools/figures.py escapees-time "
+              f"first)", file=sys.stderr)
         return 2
     print("phi,t0,t1,escapes,unclogged_realization_s,rate_per_s,theory_per_s,ratio")
     for phi, t0, t1, ev, dur, rate, th in windows_table(a.folder, windows):
