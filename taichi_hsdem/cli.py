@@ -124,14 +124,14 @@ def main(argv=None) -> int:
     video_skipped = None
     viewer = None
     if args.view:
-        from .viewer import LiveViewer, display_available
+        from .render.viewer import LiveViewer, display_available
         ok, why = display_available()
         if ok:
             viewer = LiveViewer(out, title=f"taichi_hsdem: {sim.scene.name}")
         else:
             print(f"--view skipped: {why}", file=sys.stderr)
     if sim.scene.output.video or viewer is not None:
-        from .render import vulkan_status
+        from .render.frame import vulkan_status
         ok, why = vulkan_status()
         if ok:
             recorder = VideoRecorder(sim, out / "video.mp4" if sim.scene.output.video else None,

@@ -86,7 +86,7 @@ class VideoRecorder:
     def __init__(self, sim, path: Path | None, viewer=None):
         """``path=None``: draw for ``viewer`` only (``--view`` without ``--video``)."""
         import time
-        from .render import Renderer, VideoWriter
+        from .render.frame import Renderer, VideoWriter
         t0 = time.perf_counter()
         sc = sim.scene
         m = sim.model

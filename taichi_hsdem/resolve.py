@@ -13,11 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import shapes as shp
-from . import walls as wl
-from .contact import restitution_factor
-from .fluid import free_permeability, kozeny_carman
-from .placement import count_for_fraction
+from .geometry import shapes as shp
+from .geometry import walls as wl
+from .laws import free_permeability, harmonic_mean, kozeny_carman, restitution_factor
+from .geometry.placement import count_for_fraction
 from .scene import Scene, SceneError
 
 # Resolution limits: below these a particle (or the constriction) is not seen by
@@ -163,8 +162,8 @@ def critical_time_step(species: list[Species], all_disks: bool, normalize: bool)
         # against a wall
         omega2 = max(omega2, factor * a.kn / a.mass, factor * a.ks / (1.0 / inv_ta))
         for b in species:
-            kn = _harmonic(a.kn, b.kn)
-            ks = _harmonic(a.ks, b.ks)
+            kn = harmonic_mean(a.kn, b.kn)
+            ks = harmonic_mean(a.ks, b.ks)
             meff = a.mass * b.mass / (a.mass + b.mass)
             inv_t = inv_ta + 1.0 / b.mass + b.shape.bounding_radius ** 2 / b.inertia
             omega2 = max(omega2, factor * kn / meff, factor * ks * inv_t)
@@ -176,10 +175,6 @@ def _face_nodes(s: shp.Shape) -> int:
         return max(1, len(s.nodes) // 8)
     edges = np.linalg.norm(np.roll(s.vertices, -1, axis=0) - s.vertices, axis=1)
     return int(math.ceil(len(s.nodes) * edges.max() / s.perimeter)) + 1
-
-
-def _harmonic(a: float, b: float) -> float:
-    return 2.0 * a * b / (a + b) if a + b > 0 else 0.0
 
 
 def resolve(scene: Scene) -> Model:
@@ -378,7 +373,7 @@ def resolve(scene: Scene) -> Model:
         values["fluid.cell_size"] = dx
         workers = f.workers
         if workers == "auto":
-            from .solver_pool import usable_cpus
+            from .fluid.pool import usable_cpus
             cpus = usable_cpus()
             workers = max(1, min(cpus, scene.run.realizations))
             notes["fluid.workers"] = (f"one process per usable CPU ({cpus}), at most one per "
@@ -395,7 +390,7 @@ def _initial_poses(scene: Scene, geom, templates, counts, bad):
     overlaps are refused."""
     if all(sp.positions is None for sp in scene.particles):
         return None
-    from .placement import check_initial
+    from .geometry.placement import check_initial
     rows, given_species = [], []
     for k, sp in enumerate(scene.particles):
         if sp.positions is None:
@@ -420,7 +415,7 @@ def pair_table(species: list[Species]) -> np.ndarray:
     out = np.zeros((n, n, 4))
     for a, sa in enumerate(species):
         for b, sb in enumerate(species):
-            out[a, b] = (_harmonic(sa.kn, sb.kn), _harmonic(sa.ks, sb.ks),
+            out[a, b] = (harmonic_mean(sa.kn, sb.kn), harmonic_mean(sa.ks, sb.ks),
                          0.5 * (sa.friction + sb.friction),
                          restitution_factor(0.5 * (sa.restitution + sb.restitution)))
     return out

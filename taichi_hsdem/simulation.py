@@ -27,11 +27,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import backend
-from . import shapes as shp
+from .geometry import shapes as shp
 from . import stats
-from .contact import BAD_PASSED
-from .integrate import BAD_FAST, BAD_NAN
-from .placement import PlacementError, find_free_spot, place
+from .dem.contact import BAD_PASSED
+from .dem.integrate import BAD_FAST, BAD_NAN
+from .geometry.placement import PlacementError, find_free_spot, place
 from .resolve import Model, pair_table, resolve, wall_table
 from .scene import Scene, SceneError
 
@@ -101,7 +101,7 @@ class Simulation:
         run = self.scene.run
         self.arch = backend.init(run.arch, run.precision)
         import taichi as ti
-        from . import coupling, contact, neighbors
+        from .dem import coupling, contact, neighbors
         self._ti = ti
         real = backend.real()
         npr = backend.numpy_real()
@@ -376,7 +376,7 @@ class Simulation:
                                  remaining - self.done.to_numpy(), 0)
 
     def _fused_launch(self, k: int):
-        from . import fused
+        from .dem import fused
         (hp_a, hs_a), (hp_b, hs_b) = self.hist
         nl = self.nlist
         fused.disk_steps(k, self.x, self.th, self.v, self.w, self.f, self.tau, self.f_fluid,
@@ -391,8 +391,8 @@ class Simulation:
             self.hist.reverse()   # every realization's latest history is now hist[0]
 
     def _step_per_body(self, n: int):
-        from . import contact, coupling, integrate
-        from .neighbors import F_REBUILD
+        from .dem import contact, coupling, integrate
+        from .dem.neighbors import F_REBUILD
         m = self.model
         for _ in range(n):
             if self._forces_every_step:
@@ -424,7 +424,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ fluid
     def _fluid_forces(self):
-        from . import coupling
+        from .dem import coupling
         coupling.pressure_forces(self.x, self.th, self.alive, self.running, self.tm,
                                  self.node_pos, self.node_area, self.node_meta, self.pres,
                                  self.active, self.fg, self.f_fluid, self.tau_fluid)
@@ -445,7 +445,7 @@ class Simulation:
         self.ws.from_numpy(self.w_src.astype(self._npr))
 
     def _update_fluid(self, force=False):
-        from . import coupling
+        from .dem import coupling
         m = self.model
         flux = self.scene.fluid.particle_flux
         if flux:
@@ -532,7 +532,7 @@ class Simulation:
         """Host-side checks every ``check_every`` steps; returns True while anything runs."""
         m = self.model
         sc = self.scene
-        from .neighbors import F_HISTORY_OVERFLOW
+        from .dem.neighbors import F_HISTORY_OVERFLOW
         lost = int(self.flags[F_HISTORY_OVERFLOW])
         if lost:
             self.history_overflows += lost

@@ -13,8 +13,8 @@ import pytest
 
 from conftest import make_sim
 from taichi_hsdem import Simulation, load_scene
-from taichi_hsdem import shapes as shp
-from taichi_hsdem.coupling import boundary_vectors
+from taichi_hsdem.geometry import shapes as shp
+from taichi_hsdem.dem.coupling import boundary_vectors
 
 GAP = 1.2           # H
 ETA = 1.0           # viscosity

@@ -1,4 +1,4 @@
-"""The paper's figures as commands (taichi_hsdem.figures, tools/figures.py).
+"""The paper's figures as commands (taichi_hsdem.studies.figures, tools/figures.py).
 
 The default run holds the analysis helpers (no simulation) and one command's quick
 version, the cheapest (escapees-time at one packing fraction); the other commands'
@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichi_hsdem import figures, stats, sweep
+from taichi_hsdem import stats
+from taichi_hsdem.studies import figures, sweep
 
 pytest.importorskip("matplotlib")
 

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import pdist
 
-from taichi_hsdem import placement as pl
-from taichi_hsdem import shapes as sh
-from taichi_hsdem import walls as wl
+from taichi_hsdem.geometry import placement as pl
+from taichi_hsdem.geometry import shapes as sh
+from taichi_hsdem.geometry import walls as wl
 
 # The Sec. 3.2 channel in units of the disk diameter: W/d = 1.7, a 10 d wide,
 # 20 d long upstream section (the control volume, area 200), 45 degree

@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, sys.argv[2])
 from conftest import arena_scene
 from taichi_hsdem import Simulation, load_scene
-from taichi_hsdem.coupling import boundary_vectors
+from taichi_hsdem.dem.coupling import boundary_vectors
 
 PREC = sys.argv[1]
 out = {"precision": PREC}

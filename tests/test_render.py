@@ -13,7 +13,7 @@ import pytest
 
 from taichi_hsdem import backend
 from taichi_hsdem import render
-from taichi_hsdem import shapes
+from taichi_hsdem.geometry import shapes
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -399,7 +399,7 @@ def test_no_file_is_left_in_the_working_folder_and_reinit_is_survived(tmp_path):
     tmp.mkdir()
     script = (
         "import numpy as np, taichi as ti\n"
-        "from taichi_hsdem import render, shapes\n"
+        "from taichi_hsdem import render\nfrom taichi_hsdem.geometry import shapes\n"
         "ti.init(arch=ti.cpu, log_level=ti.ERROR)\n"
         "args = ((0, 2, 0, 1), [(0, 0), (2, 0), (2, 1), (0, 1)], [], [shapes.square(0.4)])\n"
         "r = render.Renderer(*args, width=128)\n"

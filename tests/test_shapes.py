@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from taichi_hsdem import shapes as sh
+from taichi_hsdem.geometry import shapes as sh
 
 # L shape: [0,2]x[0,1] union [0,1]x[0,2], notch [1,2]x[1,2]. Given clockwise to
 # check that polygon() reorients it.

@@ -9,7 +9,7 @@ import pytest
 from conftest import arena_scene, make_sim
 from taichi_hsdem import SceneError, Simulation, load_scene
 from taichi_hsdem.resolve import node_sagitta
-from taichi_hsdem import shapes
+from taichi_hsdem.geometry import shapes
 
 HOURGLASS = Path(__file__).resolve().parents[1] / "scenes" / "hourglass24.toml"
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import taichi_hsdem.sweep as sweep_module
-from taichi_hsdem.sweep import (SweepError, calibrate, expand_grid, load_sweep,
+import taichi_hsdem.studies.sweep as sweep_module
+from taichi_hsdem.studies.sweep import (SweepError, calibrate, expand_grid, load_sweep,
                                 point_folder, run_sweep)
 
 ROOT = Path(__file__).resolve().parents[1]

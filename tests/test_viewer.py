@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichi_hsdem.viewer import LiveViewer, display_available
+from taichi_hsdem.render.viewer import LiveViewer, display_available
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from taichi_hsdem import walls as wl
+from taichi_hsdem.geometry import walls as wl
 
 # Outlines are built from a handful of sums, products and one tan(); 1e-12 on
 # numbers of order 10 leaves room for those few ulps and nothing else.

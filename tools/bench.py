@@ -87,7 +87,7 @@ def _rss_mb(pid, field="VmHWM"):
 
 def _total_rss_mb():
     """Current resident memory of this process and its solver workers, MB."""
-    from taichi_hsdem import solver_pool
+    from taichi_hsdem.fluid import pool as solver_pool
     pids = [os.getpid()] + [w.proc.pid for w in solver_pool.pool().workers]
     return sum(_rss_mb(pid, "VmRSS") or 0.0 for pid in pids)
 
@@ -145,7 +145,7 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
     workers = sim.fluid.workers if sim.fluid is not None else 0
     worker_rss = []
     if workers > 1:
-        from taichi_hsdem import solver_pool
+        from taichi_hsdem.fluid import pool as solver_pool
         worker_rss = [_rss_mb(w.proc.pid) for w in solver_pool.pool().workers]
     half = len(samples) // 2
     return {

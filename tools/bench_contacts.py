@@ -414,7 +414,7 @@ def profile_step(sim, reset, steps: int) -> dict:
     loop (plus the wrappers' own small cost).
     """
     import taichi as ti
-    from taichi_hsdem import contact, coupling, integrate
+    from taichi_hsdem.dem import contact, coupling, integrate
 
     acc: dict = {}
     clock = time.perf_counter

@@ -10,7 +10,7 @@ Usage::
 Each round runs one batch of ``--realizations`` realizations at one value of
 ``--param`` (fresh seeds every round, so the rounds are independent samples); the
 rounds bracket the target and close in on it by regula falsi on ``log <s>``
-(:func:`taichi_hsdem.sweep.calibrate`; ``<s>`` usually falls with friction, but
+(:func:`taichi_hsdem.studies.sweep.calibrate`; ``<s>`` usually falls with friction, but
 either direction works). The result is the calibrated value and the range of the
 parameter over which the target lies inside the confidence interval of ``<s>``
 (censoring-aware, :mod:`taichi_hsdem.stats`).
@@ -105,7 +105,7 @@ def main(argv=None) -> int:
     from taichi_hsdem.fluid import FluxImbalanceError
     from taichi_hsdem.scene import SceneError, load_scene
     from taichi_hsdem.simulation import RunError
-    from taichi_hsdem.sweep import CalibrationError, calibrate, simulation_evaluator
+    from taichi_hsdem.studies.sweep import CalibrationError, calibrate, simulation_evaluator
 
     sets = list(args.set)
     realizations, rounds = args.realizations, args.rounds

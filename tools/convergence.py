@@ -305,7 +305,7 @@ def _knob_value(key, value):
 def _sweep(study, points, folder, n, seed, quick):
     """Run ``points`` of the vani scene (``n`` realizations from ``seed``); every
     point must give a result."""
-    from taichi_hsdem.sweep import run_sweep
+    from taichi_hsdem.studies.sweep import run_sweep
     common = {"run.realizations": n, "run.seed": seed}
     if quick:
         common["run.t_end"] = 0.3

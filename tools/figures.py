@@ -20,7 +20,7 @@ import sys
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
-from taichi_hsdem.figures import main  # noqa: E402
+from taichi_hsdem.studies.figures import main  # noqa: E402
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -7,7 +7,7 @@ Usage::
 
 ``SWEEP.toml`` names the base scene (relative to the sweep file), ``[common]``
 overrides for every point, a ``[grid]`` of lists (cartesian product) and/or
-``[[points]]`` tables (see :mod:`taichi_hsdem.sweep`)::
+``[[points]]`` tables (see :mod:`taichi_hsdem.studies.sweep`)::
 
     scene = "../scenes/hourglass24.toml"
     [common]
@@ -57,7 +57,7 @@ def main(argv=None) -> int:
         args = _parser().parse_args(argv)
     except SystemExit as exc:          # --help (0) or a bad argument (2)
         return exc.code
-    from taichi_hsdem.sweep import SweepError, load_sweep, run_sweep
+    from taichi_hsdem.studies.sweep import SweepError, load_sweep, run_sweep
     try:
         sweep = load_sweep(args.sweep)
     except SweepError as exc:

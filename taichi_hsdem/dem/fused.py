@@ -26,7 +26,7 @@ the step it reached (``done[r]``): the host grows the arrays, rebuilds, and lets
 it catch up, so no contact is dropped.
 """
 
-from .backend import ti  # sets the environment before Taichi loads
+from ..backend import ti  # sets the environment before Taichi loads
 
 from .contact import disk_force
 from .integrate import advance_body

@@ -28,7 +28,7 @@ the rest go to `shapes.overlaps`.
 
 Examples
 --------
->>> from taichi_hsdem import shapes, walls
+>>> from taichi_hsdem.geometry import shapes, walls
 >>> g = walls.converging(width_in=10.0, length_in=20.0, constriction_width=1.7, length_out=5.0)
 >>> disk = shapes.circle(1.0)
 >>> n = count_for_fraction(0.26, g, g.upstream_region, disk)
@@ -78,7 +78,7 @@ def count_for_fraction(packing_fraction, geometry: Geometry, region, shape) -> i
 
     Examples
     --------
-    >>> from taichi_hsdem import shapes, walls
+    >>> from taichi_hsdem.geometry import shapes, walls
     >>> g = walls.converging(10.0, 20.0, 1.7, 5.0)
     >>> count_for_fraction(0.26, g, (0.0, 20.0), shapes.circle(1.0))
     66
@@ -130,7 +130,7 @@ def place(rng, geometry: Geometry, shapes, species_of_particle, region, gap=0.0,
 
     Examples
     --------
-    >>> from taichi_hsdem import shapes, walls
+    >>> from taichi_hsdem.geometry import shapes, walls
     >>> g = walls.converging(10.0, 20.0, 1.7, 5.0)
     >>> x, theta = place(1, g, [shapes.square(1.0)], np.zeros(40, int), (0.0, 20.0), gap=0.01)
     >>> x.shape, theta.shape
@@ -191,7 +191,7 @@ def find_free_spot(rng, geometry: Geometry, shape, region, others_x, others_thet
 
     Examples
     --------
-    >>> from taichi_hsdem import shapes, walls
+    >>> from taichi_hsdem.geometry import shapes, walls
     >>> g = walls.converging(10.0, 20.0, 1.7, 5.0)
     >>> disk = shapes.circle(1.0)
     >>> spot = find_free_spot(0, g, disk, (0.0, 2.0), np.empty((0, 2)), np.empty(0), [])
@@ -234,7 +234,7 @@ def check_initial(geometry: Geometry, shapes, x, theta, species_of_particle, gap
 
     Examples
     --------
-    >>> from taichi_hsdem import shapes, walls
+    >>> from taichi_hsdem.geometry import shapes, walls
     >>> g = walls.converging(10.0, 20.0, 1.7, 5.0)
     >>> check_initial(g, [shapes.circle(1.0)], [[5.0, 0.0], [5.5, 0.0], [5.0, 4.75]],
     ...               np.zeros(3), [0, 0, 0], names=["disks"])

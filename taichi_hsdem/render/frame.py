@@ -52,7 +52,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang import impl
 
-from taichi_hsdem import backend
+from .. import backend
 
 __all__ = ["vulkan_status", "colormap", "triangulate", "Renderer", "VideoWriter",
            "close_window"]

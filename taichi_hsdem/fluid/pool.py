@@ -8,7 +8,7 @@ hierarchies between solves and receives only the new matrix values, right-hand
 sides and initial guesses.
 
 The workers are started with :mod:`subprocess` (``python -m
-taichi_hsdem.solver_pool``), not :mod:`multiprocessing`: a spawned multiprocessing
+taichi_hsdem.fluid.pool``), not :mod:`multiprocessing`: a spawned multiprocessing
 child re-imports the user's main script, which runs a script without a
 ``__main__`` guard a second time, and forking a process that runs Taichi's thread
 pool is unsafe. Messages are pickles over the worker's stdin and stdout; the
@@ -152,7 +152,7 @@ class _Worker:
                    MKL_NUM_THREADS="1")
         try:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "taichi_hsdem.solver_pool"], stdin=subprocess.PIPE,
+                [sys.executable, "-m", "taichi_hsdem.fluid.pool"], stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE, env=env, cwd=os.path.dirname(os.path.dirname(
                     os.path.abspath(__file__))))
         except OSError as exc:

@@ -13,7 +13,7 @@
 """
 
 import numpy as np
-from .backend import ti  # sets the environment before Taichi loads
+from ..backend import ti  # sets the environment before Taichi loads
 
 from .contact import cross, node_world, rot, rot_t, spin, template_sample
 

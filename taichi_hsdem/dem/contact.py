@@ -31,9 +31,7 @@ Disks (every particle a circle) take the analytic path: one contact point per
 pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
 """
 
-import math
-
-from .backend import ti  # sets the environment before Taichi loads
+from ..backend import ti  # sets the environment before Taichi loads
 
 vec2 = ti.math.vec2
 
@@ -45,14 +43,6 @@ PAIR_KN, PAIR_KS, PAIR_MU, PAIR_CE = 0, 1, 2, 3
 P_DT, P_NORMALIZE, P_WALL_OX, P_WALL_OY, P_WALL_H = 0, 1, 2, 3, 4
 N_PARAMS = 5
 BIG = 1.0e30
-
-
-def restitution_factor(e: float) -> float:
-    """``c_e`` such that ``gamma_n = c_e sqrt(k_n m_eff)`` gives restitution ``e``."""
-    if e >= 1.0:
-        return 0.0
-    le = math.log(e)
-    return -2.0 * le / math.sqrt(math.pi ** 2 + le ** 2)
 
 
 @ti.func

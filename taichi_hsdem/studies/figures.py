@@ -98,8 +98,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import stats
-from .scene import Scene, SceneError, load_scene
+from .. import stats
+from ..scene import Scene, SceneError, load_scene
 
 FIGURES = ("escapees-time", "pmf-collapse", "friction", "shapes", "polygons")
 DEFAULT_REALIZATIONS = 10
@@ -179,12 +179,12 @@ class PointRun:
 
 def bounding_diameter(scene: Scene, species: int = 0) -> float:
     """Bounding (circumscribed) diameter ``d_b`` of a species' shape."""
-    from .resolve import species_shape
+    from ..resolve import species_shape
     return 2.0 * species_shape(scene.particles[species]).bounding_radius
 
 
 def _species_shape(scene: Scene, species: int = 0):
-    from .resolve import species_shape
+    from ..resolve import species_shape
     return species_shape(scene.particles[species])
 
 
@@ -281,7 +281,7 @@ def build_points(command: str, base: Scene, opts: dict) -> list[Point]:
 # ----------------------------------------------------------------------------- running
 
 def _point_info(sim) -> dict:
-    from .walls import fluid_area
+    from ..geometry.walls import fluid_area
     m = sim.model
     sc = sim.scene
     region = m.feed_region
@@ -300,8 +300,8 @@ def run_point(point: Point, realizations: int, batch: int | None = None, log=Non
 
     Realization ``k`` has seed ``run.seed + k`` whatever the batching.
     """
-    from .fluid import FluxImbalanceError
-    from .simulation import RunError, Simulation
+    from ..fluid import FluxImbalanceError
+    from ..simulation import RunError, Simulation
     out = PointRun(point)
     batch = realizations if not batch else max(1, min(int(batch), realizations))
     seed0 = point.scene.run.seed
@@ -794,7 +794,7 @@ def _point_key(point: Point, realizations: int) -> str:
     """What makes a finished point reusable: its scene (TOML text, seeds included),
     the realization count and the package code (:func:`taichi_hsdem.sweep.code_digest`).
     The batch size is left out: a realization does not depend on those beside it."""
-    from .scene import scene_to_toml
+    from ..scene import scene_to_toml
     from .sweep import code_digest
     text = (scene_to_toml(point.scene) + f"\n# realizations {int(realizations)}"
             f"\n# code {code_digest()}")
@@ -882,7 +882,7 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
             raise FigureError(f"{base.source}: fluid.bc: escapees-time needs a flow-rate inlet "
                               f"(the theory line uses Q = fluid.flow_rate)")
         points = build_points(command, base, opts)
-        from .resolve import resolve
+        from ..resolve import resolve
         for p in points:       # refuse impossible set-ups before any compute
             resolve(p.scene.with_values({"run.realizations": 1}))
     except SceneError as exc:

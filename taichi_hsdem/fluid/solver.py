@@ -39,7 +39,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from . import solver_pool
+from . import pool as solver_pool
+from ..laws import free_permeability, harmonic_mean, kozeny_carman  # noqa: F401 (re-exported)
 
 # Most preconditioned CG iterations one realization may take in one solve.
 # Ruge-Stuben-preconditioned CG needs about 10 for a relative residual of 1e-8 at
@@ -63,80 +64,6 @@ FULL_EVERY = 8
 _SIDES = ("left", "right", "bottom", "top")
 
 
-def free_permeability(gap):
-    """Permeability of the empty Hele-Shaw cell, ``kappa = H^2 / 12``.
-
-    Parameters
-    ----------
-    gap : float
-        Plate spacing ``H``, m.
-
-    Returns
-    -------
-    float
-        Depth-averaged permeability, m^2.
-
-    Examples
-    --------
-    >>> free_permeability(1.2e-3)
-    1.2e-07
-    """
-    if not gap > 0:
-        raise ValueError(f"gap must be > 0, got {gap}")
-    return float(gap) ** 2 / 12.0
-
-
-def kozeny_carman(sphericity, diameter, area, gap):
-    """Permeability of a fluid cell covered by a particle (Kozeny-Carman).
-
-    ``kappa = Phi_s^2 eps^3 d^2 / (150 (1 - eps)^2)`` with the porosity of the
-    cell column that holds the particle, ``eps = 1 - V_p / (A H)`` and
-    ``V_p = (2/3) A d`` (a sphere of diameter ``d`` for a disk of that diameter; the
-    same ratio for other shapes). See docs/scene.md, Conventions.
-
-    Parameters
-    ----------
-    sphericity : float
-        ``Phi_s`` in (0, 1], the 2D sphericity ``sqrt(4 pi A) / P``.
-    diameter : float
-        ``d``, the particle's equivalent diameter ``sqrt(4 A / pi)``, m.
-    area : float
-        ``A``, the particle's cross-section, m^2.
-    gap : float
-        ``H``, plate spacing, m.
-
-    Returns
-    -------
-    float
-        Permeability, m^2.
-
-    Raises
-    ------
-    ValueError
-        If ``eps <= 0``: the particle's volume does not fit in the gap
-        (``H <= (2/3) d``).
-
-    Examples
-    --------
-    >>> d = 1e-3
-    >>> k = kozeny_carman(1.0, d, np.pi * d**2 / 4, 1.2 * d)
-    >>> round(k / free_permeability(1.2 * d), 4)  # about 60 times less permeable
-    0.0158
-    """
-    if not (sphericity > 0 and diameter > 0 and area > 0 and gap > 0):
-        raise ValueError(
-            "kozeny_carman needs sphericity, diameter, area and gap > 0, got "
-            f"{sphericity}, {diameter}, {area}, {gap}")
-    volume = (2.0 / 3.0) * area * diameter
-    eps = 1.0 - volume / (area * gap)
-    if eps <= 0:
-        raise ValueError(
-            f"Kozeny-Carman porosity {eps:.3g} <= 0: a particle of diameter {diameter} "
-            f"does not fit in a gap of {gap}; the gap must exceed (2/3) d = "
-            f"{2.0 * diameter / 3.0:.6g}")
-    return float(sphericity**2 * eps**3 * diameter**2 / (150.0 * (1.0 - eps) ** 2))
-
-
 class FluxImbalanceError(RuntimeError):
     """The inflow and outflow of a solved realization do not balance.
 
@@ -158,7 +85,7 @@ class FluxImbalanceError(RuntimeError):
             f"pressure solve of realization {realization} does not conserve mass: "
             f"inflow {flux_in:.6g}, outflow {flux_out:.6g} (per unit depth), imbalance "
             f"{abs(flux_in - flux_out):.3g} > {limit:.3g} allowed for solver tolerance "
-            f"{tol:g}. The multigrid solve did not converge (see MAXITER); check the "
+            f"{tol:g}. The multigrid solve did not converge (see PressureSolver's maxiter); check the "
             "permeability field for zeros or extreme contrasts, or loosen "
             "fluid.solver_tol")
 
@@ -193,14 +120,6 @@ class SolveInfo:
     residual: float
     rebuilt: bool
     blocked: np.ndarray
-
-
-def _harmonic(k1, k2):
-    """``2 k1 k2 / (k1 + k2)``, and 0 where both are 0 (a face between two solids)."""
-    total = k1 + k2
-    out = np.zeros(np.broadcast(k1, k2).shape)
-    np.divide(2.0 * k1 * k2, total, out=out, where=total > 0)
-    return out
 
 
 class PressureSolver:
@@ -244,11 +163,17 @@ class PressureSolver:
         Processes that share the realizations' solves (1: all in this process).
         Each realization is solved the same way wherever it runs, so the answer
         does not depend on ``workers``; if a worker fails, the solver warns and
-        goes on in this process. See :mod:`taichi_hsdem.solver_pool`.
+        goes on in this process. See :mod:`taichi_hsdem.fluid.pool`.
     pool_after : float
         Solve in this process until the solves have taken this many seconds, then
         move to the workers: starting a worker costs about a second of CPU (its
         imports), which a short run never earns back.
+    full_every : int
+        Refreshes of a hierarchy's coarse operators between two full Ruge-Stuben
+        builds (see ``FULL_EVERY``).
+    maxiter : int
+        Most CG iterations one realization may take in one solve (see ``MAXITER``);
+        a solve that stops there fails the flux check.
 
     Notes
     -----
@@ -306,7 +231,8 @@ class PressureSolver:
     """
 
     def __init__(self, active, dx, dy, viscosity, bc, n_batch=1, tol=1e-8, gap=None,
-                 workers=1, pool_after=POOL_AFTER_SECONDS, full_every=FULL_EVERY):
+                 workers=1, pool_after=POOL_AFTER_SECONDS, full_every=FULL_EVERY,
+                 maxiter=MAXITER):
         t_start = time.perf_counter()
         active = np.array(active, dtype=bool)  # a copy: the caller may reuse theirs
         if active.ndim != 2:
@@ -331,6 +257,7 @@ class PressureSolver:
         if not (isinstance(full_every, (int, np.integer)) and full_every >= 0):
             raise ValueError(f"full_every must be an int >= 0, got {full_every}")
         self.full_every = int(full_every)
+        self.maxiter = int(maxiter)
         self._pool = solver_pool.pool()
         self._token = self._pool.token()
         self._pattern_at = set()  # where the pattern was sent: "local" or (generation, w)
@@ -492,7 +419,7 @@ class PressureSolver:
         """
         n, eta = self._n, self.viscosity
         m = len(which)
-        T = self._fg * _harmonic(kappa[:, self._fa], kappa[:, self._fb]) / eta
+        T = self._fg * harmonic_mean(kappa[:, self._fa], kappa[:, self._fb]) / eta
         Td = self._dg * kappa[:, self._dc] / eta
         weight = kappa[:, self._ic]  # inflow shares; the uniform dy cancels
         pinned = np.zeros((m, n), dtype=bool)
@@ -689,7 +616,7 @@ class PressureSolver:
         pattern = None if "local" in self._pattern_at else self._pattern()
         self._pattern_at.add("local")
         x, its, res, setup = solver_pool.solve_block(
-            self._token, pattern, range(R), ops, rhs, guess, self.tol, MAXITER)
+            self._token, pattern, range(R), ops, rhs, guess, self.tol, self.maxiter)
         self._stats["setup_seconds"] += setup
         return x, its, res
 
@@ -706,7 +633,7 @@ class PressureSolver:
                 send = {r: ops[r] for r in rows if r in ops}
             calls.append(("solve_block", (
                 self._token, self._pattern() if first else None, rows,
-                send, rhs[rows], guess[rows], self.tol, MAXITER)))
+                send, rhs[rows], guess[rows], self.tol, self.maxiter)))
             owned.append(rows)
         replies = self._pool.map(calls)  # raises PoolError if any worker failed
         self._pattern_at.update((generation, w) for w in range(W))
@@ -797,7 +724,7 @@ class PressureSolver:
         ux_face = np.zeros((R, nx + 1, ny))
         both = has_p[:, :-1] & has_p[:, 1:]
         ux_face[:, 1:-1] = np.where(
-            both, -_harmonic(k[:, :-1], k[:, 1:]) * (p[:, 1:] - p[:, :-1]) / (eta * dx), 0.0)
+            both, -harmonic_mean(k[:, :-1], k[:, 1:]) * (p[:, 1:] - p[:, :-1]) / (eta * dx), 0.0)
         left = has_p[:, 0] & np.isfinite(side["left"])
         ux_face[:, 0] = np.where(left, k[:, 0] * (side["left"] - p[:, 0]) / (eta * dx / 2), 0.0)
         right = has_p[:, -1] & np.isfinite(side["right"])
@@ -812,7 +739,7 @@ class PressureSolver:
         uy_face = np.zeros((R, nx, ny + 1))
         both = has_p[:, :, :-1] & has_p[:, :, 1:]
         uy_face[:, :, 1:-1] = np.where(
-            both, -_harmonic(k[:, :, :-1], k[:, :, 1:]) * (p[:, :, 1:] - p[:, :, :-1])
+            both, -harmonic_mean(k[:, :, :-1], k[:, :, 1:]) * (p[:, :, 1:] - p[:, :, :-1])
             / (eta * dy), 0.0)
         bottom = has_p[:, :, 0] & np.isfinite(side["bottom"])
         uy_face[:, :, 0] = np.where(

@@ -12,7 +12,7 @@ reproducible.
 """
 
 import numpy as np
-from .backend import ti  # sets the environment before Taichi loads
+from ..backend import ti  # sets the environment before Taichi loads
 
 vec2 = ti.math.vec2
 

@@ -12,7 +12,7 @@ a body that has moved half the Verlet skin since the last neighbour build (asks
 for a rebuild). It also counts bodies crossing the escape line and parks them.
 """
 
-from .backend import ti  # sets the environment before Taichi loads
+from ..backend import ti  # sets the environment before Taichi loads
 
 from .neighbors import F_REBUILD
 

@@ -60,8 +60,8 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from . import stats
-from .scene import Scene, SceneError, _toml_value, load_scene, read_toml, scene_to_toml
+from .. import stats
+from ..scene import Scene, SceneError, _toml_value, load_scene, read_toml, scene_to_toml
 
 __all__ = [
     "SweepError", "Sweep", "load_sweep", "expand_grid", "point_folder", "run_sweep",
@@ -463,10 +463,10 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
     SweepError
         A point is not a valid scene (every problem listed; nothing is run).
     """
-    from . import backend
-    from .fluid import FluxImbalanceError
-    from .output import write_resolved_scene, write_series, write_summary
-    from .simulation import RunError, Simulation
+    from .. import backend
+    from ..fluid import FluxImbalanceError
+    from ..output import write_resolved_scene, write_series, write_summary
+    from ..simulation import RunError, Simulation
 
     base = Path(base_scene_path)
     common = dict(common or {})
@@ -902,7 +902,7 @@ def simulation_evaluator(scene_path: str | Path, param: str, realizations: int,
     when the evaluator is made (``SceneError``); check ``param`` at the values
     you will pass (``load_scene(scene_path, [f"{param}={value}"])``).
     """
-    from .simulation import Simulation
+    from ..simulation import Simulation
 
     overrides = list(overrides)
     scene = load_scene(scene_path, overrides)
