@@ -14,7 +14,7 @@ Examples
 >>> result = th.run(scene)                                               # doctest: +SKIP
 >>> result.summary["mean_escapees"]                                      # doctest: +SKIP
 """
-__version__ = "0.1.0"
+from .version import __version__
 
 from .scene import Scene, SceneError, load_scene, scene_to_toml  # noqa: E402
 

@@ -89,7 +89,3 @@ def real():
 def numpy_real():
     import numpy as np
     return np.float64 if _STATE["precision"] == "f64" else np.float32
-
-
-def arch_name() -> str:
-    return _STATE.get("arch", "uninitialised")

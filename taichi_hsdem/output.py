@@ -103,7 +103,7 @@ class VideoRecorder:
             # Square cells of side dx from the domain's lower-left corner; the
             # top row may overhang y_max.
             extent = (g.x_min, g.x_min + nx * dx, g.y_min, g.y_min + ny * dx)
-            prange = self._range_of(sim.pressure_np[self.r])
+            prange = self._range_of(sim.pressure()[self.r])
         self.renderer = Renderer((g.x_min, g.x_max, g.y_min, g.y_max), g.outline,
                                  list(g.obstacles), [s.shape for s in m.species],
                                  width=sc.output.width, pressure_shape=pshape,
@@ -181,21 +181,19 @@ class VideoRecorder:
         t0 = time.perf_counter()
         r = self.r
         # stopped (checked before drawing): this frame shows the final state, the last
-        self.ended = not bool(sim.running.to_numpy()[r])
+        self.ended = not bool(sim.running()[r])
         try:
             pres = None
             if sim.fluid is not None:
-                pres = self._display_pressure(sim.pressure_np[r])
+                pres = self._display_pressure(sim.pressure()[r])
                 if self.renderer.pressure_range is None:
                     # built before any solve: fix the range at the first frame's
                     self.renderer.pressure_range = self._range_of(pres)
-            x = sim.x.to_numpy()[r].astype(float)
-            theta = sim.th.to_numpy()[r].astype(float)
-            alive = sim.alive.to_numpy()[r].astype(bool)
+            st = sim.state()
             # the live counter: the results' count is only refreshed every check
-            esc = int(sim.escaped.to_numpy()[r])
-            frame = self.renderer.draw(x, theta, sim.sp_np, alive, pressure=pres, t=sim.t,
-                                       escapees=esc)
+            esc = int(sim.escaped()[r])
+            frame = self.renderer.draw(st["x"][r], st["theta"][r], st["species"],
+                                       st["alive"][r], pressure=pres, t=sim.t, escapees=esc)
             if self.writer is not None:
                 self.writer.write(frame)
         except Exception as exc:        # a broken video must not lose the run

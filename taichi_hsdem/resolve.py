@@ -26,6 +26,20 @@ MIN_WALL_CELLS_PER_DIAMETER = 4.0
 MIN_LS_CELLS_PER_DIAMETER = 5.0
 MIN_FLUID_CELLS_ACROSS_CONSTRICTION = 3.0
 
+# How often things happen, for the "auto" values decided at the end of resolve().
+CHECK_INTERVAL = 100          # steps between host-side checks, at least
+CHECK_TRAVEL = 0.05           # with fluid: d_min a particle at the constriction's mean
+                              # speed may move between checks (sets a longer interval)
+SKIN_FRACTION = 0.25          # Verlet skin as a fraction of the smallest d_eq
+UPDATE_CELL_FRACTION = 1.0    # fluid cells a particle may cross between auto-interval solves:
+                              # the knee of `tools/convergence.py interval` (vani scene, 100
+                              # realizations per point: 0.5 and 1 cell agree, 2 and 3 cells
+                              # give fewer escapees; README, Accuracy)
+MAX_TRAVEL_BETWEEN_SOLVES = 0.5  # diameters a particle may move between solves, at most
+# Taichi backends on which "auto" stepping stays per-step (one realization per thread
+# would leave a GPU idle).
+GPU_ARCHS = ("cuda", "vulkan", "metal", "opengl", "dx11", "dx12", "amdgpu", "gles")
+
 
 @dataclass
 class Species:
@@ -68,6 +82,11 @@ class Model:
     # (placed at random); None when no species gives positions
     initial_poses: np.ndarray | None = None
     kappa_free: float = 0.0
+    stepping: str = "per_step"    # "fused" or "per_step" (run.stepping resolved)
+    check_every: int = CHECK_INTERVAL  # steps between host-side checks
+    skin: float = 0.0             # Verlet skin
+    # mean fluid speed through the constriction of the open channel (no particles)
+    open_channel_speed: float | None = None
     notes: dict[str, str] = field(default_factory=dict)
 
     @property
@@ -81,10 +100,6 @@ class Model:
     @property
     def d_max(self) -> float:
         return max(s.d_eq for s in self.species)
-
-    @property
-    def fluid_origin(self) -> tuple[float, float]:
-        return (self.geometry.x_min, self.geometry.y_min)
 
     def bc(self) -> dict:
         f = self.scene.fluid
@@ -177,8 +192,13 @@ def _face_nodes(s: shp.Shape) -> int:
     return int(math.ceil(len(s.nodes) * edges.max() / s.perimeter)) + 1
 
 
-def resolve(scene: Scene) -> Model:
-    """Resolve every derived and ``auto`` value of ``scene``; refuse what cannot work."""
+def resolve(scene: Scene, arch: str = "x64") -> Model:
+    """Resolve every derived and ``auto`` value of ``scene``; refuse what cannot work.
+
+    ``arch`` is the Taichi backend the run uses (``backend.init``'s answer:
+    ``x64``/``arm64`` for the CPU, ``cuda``, ``vulkan``, ...): it decides
+    ``run.stepping = "auto"``.
+    """
     src = scene.source
     problems: list[str] = []
 
@@ -380,8 +400,89 @@ def resolve(scene: Scene) -> Model:
                                       f"realization ({scene.run.realizations})")
             values["fluid.workers"] = workers
         model.fluid_workers = int(workers)  # the solver uses at most one per realization
+    model.skin = SKIN_FRACTION * d_min
+    _resolve_stepping(model, arch, values, notes)
+    if f.enabled:
+        _resolve_intervals(model, values, notes)
     model.scene = scene.with_values(values)
     return model
+
+
+def _resolve_stepping(model: Model, arch: str, values: dict, notes: dict) -> None:
+    """``run.stepping``: the fused stepper for disks with held fluid forces on the
+    CPU (many steps per kernel launch, one realization per thread)."""
+    sc = model.scene
+    given = sc.run.stepping
+    blockers = []
+    if not model.all_disks:
+        blockers.append("the particles are not all disks on the analytic path")
+    if sc.fluid.enabled and sc.fluid.force_update == "step":
+        blockers.append('fluid.force_update = "step" re-evaluates the fluid force every step')
+    if given == "fused" and blockers:
+        raise SceneError([f"{sc.source}: run.stepping = \"fused\" is not available: "
+                          + "; ".join(blockers) + ' (use "auto" or "per_step")'])
+    if given != "auto":
+        model.stepping = given
+        return
+    fused = arch not in GPU_ARCHS and not blockers
+    if fused:
+        why = ("disks with held fluid forces on the CPU: many steps per kernel "
+               "launch, one realization per thread")
+    elif blockers:
+        why = "per_step: " + "; ".join(blockers)
+    else:
+        why = f"per_step on {arch}: one realization per thread would leave a GPU idle"
+    model.stepping = "fused" if fused else "per_step"
+    values["run.stepping"] = model.stepping
+    notes["run.stepping"] = why
+
+
+def open_channel_speed(model: Model) -> float:
+    """Mean fluid speed through the constriction of the channel without particles:
+    a property of the scene, the same for every realization, so that no
+    realization's numbers depend on the others run beside it."""
+    from .fluid import PressureSolver
+    fl = model.scene.fluid
+    solver = PressureSolver(model.fluid_active, model.fluid_dx, model.fluid_dx, fl.viscosity,
+                            model.bc(), n_batch=1, tol=fl.solver_tol, gap=fl.gap)
+    _, info = solver.solve(np.where(model.fluid_active, model.kappa_free, 0.0))
+    return float(np.abs(info.flux_out).max()) / model.geometry.constriction_width
+
+
+def _resolve_intervals(model: Model, values: dict, notes: dict) -> None:
+    """``run.check_every`` and ``fluid.update_interval = "auto"``: the fastest
+    expected particle (the mean fluid speed through the open constriction) moves
+    ``CHECK_TRAVEL`` d between checks and crosses ``UPDATE_CELL_FRACTION`` fluid
+    cell between solves; a given interval that lets it overrun the pressure is
+    refused."""
+    sc = model.scene
+    u = model.open_channel_speed = open_channel_speed(model)
+    dt, d_min = model.dt, model.d_min
+    if u > 0:
+        # The paper's small time step would otherwise check every 4e-5 s, far finer
+        # than anything changes.
+        model.check_every = max(CHECK_INTERVAL, int(CHECK_TRAVEL * d_min / (u * dt)))
+        notes["run.check_every"] = (
+            f"{model.check_every} steps: a particle at the mean constriction speed "
+            f"{u:.4g} moves at most {CHECK_TRAVEL:g} d between checks "
+            f"(and at least {CHECK_INTERVAL} steps)")
+    given = sc.fluid.update_interval
+    if given != "auto":
+        travel = given * dt * u
+        if travel > MAX_TRAVEL_BETWEEN_SOLVES * d_min:
+            most = int(MAX_TRAVEL_BETWEEN_SOLVES * d_min / (u * dt))
+            raise SceneError([
+                f"{sc.source}: fluid.update_interval: {given} steps let a particle "
+                f"at the constriction's mean fluid speed ({u:.3g}) move "
+                f"{travel / d_min:.2g} diameters between pressure solves, "
+                f"overrunning the pressure that pushes it; use at most {most} "
+                f"(or \"auto\")"])
+        return
+    n = max(1, int(UPDATE_CELL_FRACTION * model.fluid_dx / (u * dt))) if u > 0 else 1
+    values["fluid.update_interval"] = n
+    notes["fluid.update_interval"] = (
+        f"{UPDATE_CELL_FRACTION:g} cell / (u_c {u:.4g} * dt): a particle at the mean "
+        f"constriction speed crosses {UPDATE_CELL_FRACTION:g} cell between solves")
 
 
 def _initial_poses(scene: Scene, geom, templates, counts, bad):

@@ -14,7 +14,7 @@ import pytest
 from conftest import make_sim
 from taichi_hsdem import Simulation, load_scene
 from taichi_hsdem.geometry import shapes as shp
-from taichi_hsdem.dem.coupling import boundary_vectors
+from taichi_hsdem.geometry.shapes import boundary_vectors
 
 GAP = 1.2           # H
 ETA = 1.0           # viscosity
@@ -79,7 +79,7 @@ def far_gradient(sim, width=WIDTH):
     ``G = q eta / (kappa_free W)``: this already accounts for the small extra
     resistance the particle adds to the channel (the flux test below checks it).
     """
-    return sim.last_fluid_info.flux_out[0] * ETA / (sim.model.kappa_free * width)
+    return sim.fluid.last_info.flux_out[0] * ETA / (sim.model.kappa_free * width)
 
 
 def image_factor(dipole, width=WIDTH):
@@ -270,7 +270,7 @@ def test_pressure_force_kernel_in_uniform_and_linear_fields():
     areas = np.array([node_area(s.shape) for s in sim.model.species])
     perims = np.array([s.shape.perimeter for s in sim.model.species])
     for grad, p0 in (((0.0, 0.0), 7.5), ((-0.8, 0.35), 3.0)):
-        sim.pres.from_numpy((p0 + grad[0] * X + grad[1] * Y)[None])
+        sim.fluid.pres.from_numpy((p0 + grad[0] * X + grad[1] * Y)[None])
         sim.step(1)
         f, m = sim.forces()
         expected = -GAP * areas[:, None] * np.array(grad)[None, :]
@@ -328,7 +328,7 @@ def test_auto_damping_disk_drifts_at_the_mean_fluid_velocity(density, carried):
 
     sim.run(on_frame=frame, frame_times=times)
     (t0, x0, v0), (t1, x1, _), (t2, x2, _) = rec[:3]
-    u = sim.last_fluid_info.flux_out[0] / WIDTH                # q / W
+    u = sim.fluid.last_info.flux_out[0] / WIDTH                # q / W
     v_mean = (x2[0] - x1[0]) / (t2 - t1)
     sp = sim.model.species[0]
     corrected = u * node_area(sp.shape) / sp.shape.area * image_factor(beta * 0.25)
@@ -359,12 +359,12 @@ def test_straight_channel_flux_through_the_simulation():
     sim.set_state([[[X0, WIDTH / 2]]], alive=[[0]])
     kf = sim.model.kappa_free
     q = kf * WIDTH * (p_in - p_out) / (ETA * LENGTH)
-    info = sim.last_fluid_info
+    info = sim.fluid.last_info
     assert info.flux_out[0] == pytest.approx(q, rel=1e-8)
     assert info.flux_in[0] == pytest.approx(q, rel=1e-8)
     x = (np.arange(sim.model.fluid_shape[0]) + 0.5) * sim.model.fluid_dx
     exact = p_in + (p_out - p_in) * x / LENGTH
-    assert np.abs(sim.pressure_np[0] - exact[:, None]).max() < 1e-8 * (p_in - p_out)
+    assert np.abs(sim.pressure()[0] - exact[:, None]).max() < 1e-8 * (p_in - p_out)
     # The disk, live at the centre, adds the resistance of its dipole: far from
     # it the image row (spacing W) of p' = -G beta a^2 x / r^2 sums to
     # -+ G beta a^2 pi / W, a jump of 2 pi beta a^2 G / W, so
@@ -374,17 +374,17 @@ def test_straight_channel_flux_through_the_simulation():
     sim.set_state([[[X0, WIDTH / 2]]])
     beta = beta_of(sim)
     extra = 2 * math.pi * beta * 0.25 / WIDTH
-    fall = 1 - sim.last_fluid_info.flux_out[0] / q
+    fall = 1 - sim.fluid.last_info.flux_out[0] / q
     assert fall == pytest.approx(extra / (LENGTH + extra), rel=0.2)
     # The flow-rate inlet delivers Q / H per unit depth, exactly.
     Q = 2.5
     sim = make_sim(channel([dict(DISK, count=1)], cell=0.125, flow_rate=Q))
     sim.set_state([[[X0, WIDTH / 2]]], alive=[[0]])
-    info = sim.last_fluid_info
+    info = sim.fluid.last_info
     assert info.flux_in[0] == pytest.approx(Q / GAP, rel=1e-12)
     assert info.flux_out[0] == pytest.approx(Q / GAP, rel=1e-8)
     # and the inlet face sits at p_out + (Q/H) eta L / (kappa W)
-    p_face = sim.pressure_np[0, 0].mean() + (Q / GAP) * ETA * 0.5 * sim.model.fluid_dx / (kf * WIDTH)
+    p_face = sim.pressure()[0, 0].mean() + (Q / GAP) * ETA * 0.5 * sim.model.fluid_dx / (kf * WIDTH)
     assert p_face == pytest.approx((Q / GAP) * ETA * LENGTH / (kf * WIDTH), rel=1e-8)
 
 

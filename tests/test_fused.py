@@ -19,28 +19,20 @@ SHORT = ["run.t_end=4.0", "feed.region=[14.0, 22.0]", "run.realizations=2",
 
 
 def run(stepping, extra=(), shrink=False):
-    sim = Simulation(load_scene(HOURGLASS, SHORT + [f"run.stepping={stepping}", *extra]))
-    if shrink:
-        # capacities just large enough for the loose initial placement: the denser
-        # packing at the neck overflows them in the kernel's own rebuilds
-        nl = sim.nlist
-        nl.cell_cap, nl.nbr_cap = 1, 1
-        nl._alloc_cells()
-        nl._alloc_nbr()
-        sim._rebuild()
-        sim.initial_caps = (nl.cell_cap, nl.nbr_cap)
-        launch, step = sim._fused_launch, sim.step
-        calls = {"launch": 0, "step": 0}
+    """The hourglass run; ``shrink``: neighbour capacities of one, so that the
+    loose initial placement just fits and the denser packing at the neck overflows
+    them in the kernel's own rebuilds."""
+    caps = (1, 1) if shrink else (8, 16)
+    sim = Simulation(load_scene(HOURGLASS, SHORT + [f"run.stepping={stepping}", *extra]),
+                     neighbor_capacities=caps)
+    sim.initial_caps = (sim.neighbors.cell_cap, sim.neighbors.nbr_cap)
+    step = sim.step
+    sim.calls = {"step": 0}
 
-        def counted_launch(k):
-            calls["launch"] += 1
-            launch(k)
-
-        def counted_step(n=1):
-            calls["step"] += 1
-            step(n)
-        sim._fused_launch, sim.step = counted_launch, counted_step
-        sim.calls = calls
+    def counted_step(n=1):
+        sim.calls["step"] += 1
+        step(n)
+    sim.step = counted_step
     res = sim.run()
     return sim, res
 
@@ -71,7 +63,7 @@ def test_per_step_run_is_not_vacuous(per_step):
 
 def test_fused_gives_the_per_step_bits(per_step):
     fused = run("fused")
-    assert fused[0]._fused and not per_step[0]._fused
+    assert fused[0].fused and not per_step[0].fused
     _same(fused, per_step)
 
 
@@ -80,14 +72,14 @@ def test_overflowing_rebuilds_catch_up(per_step):
     rebuild, the host grows the arrays and the realization catches up; nothing is
     dropped, so the result is still the per-step one."""
     sim, res = run("fused", shrink=True)
-    assert (sim.nlist.cell_cap, sim.nlist.nbr_cap) != sim.initial_caps   # grown in the run
-    assert sim.calls["launch"] > sim.calls["step"]                     # and caught up
+    assert (sim.neighbors.cell_cap, sim.neighbors.nbr_cap) != sim.initial_caps   # grown in the run
+    assert sim.launches > sim.calls["step"]                             # and caught up
     _same((sim, res), per_step)
 
 
 def test_auto_records_its_choice():
     sim = Simulation(load_scene(HOURGLASS, SHORT))
-    assert sim._fused and sim.scene.run.stepping == "fused"
+    assert sim.fused and sim.scene.run.stepping == "fused"
     assert "run.stepping" in sim.model.notes
 
 
@@ -97,5 +89,5 @@ def test_fused_refused_where_it_does_not_apply():
                               ["run.stepping=fused", "run.t_end=0.01"]))
     # auto falls back to per_step there, and says why
     sim = Simulation(load_scene(SCENES / "squares.toml", ["run.t_end=0.01"]))
-    assert not sim._fused and sim.scene.run.stepping == "per_step"
+    assert not sim.fused and sim.scene.run.stepping == "per_step"
     assert "not all disks" in sim.model.notes["run.stepping"]

@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, sys.argv[2])
 from conftest import arena_scene
 from taichi_hsdem import Simulation, load_scene
-from taichi_hsdem.dem.coupling import boundary_vectors
+from taichi_hsdem.geometry.shapes import boundary_vectors
 
 PREC = sys.argv[1]
 out = {"precision": PREC}
@@ -142,7 +142,7 @@ def lone_disk():
     res = {"offsets": list(offs), "fx": [], "fy": [], "m": [], "exact": [],
            "perimeter": sp.shape.perimeter, "nodes": len(sp.shape.nodes)}
     for r in range(len(offs)):
-        grad = sim.last_fluid_info.flux_out[r] * ETA / (sim.model.kappa_free * WIDTH)
+        grad = sim.fluid.last_info.flux_out[r] * ETA / (sim.model.kappa_free * WIDTH)
         res["exact"].append((1 + beta) * node_area(sp.shape) * grad * GAP
                             * image_factor(beta * 0.25))
         res["fx"].append(float(f[r, 0, 0]))
@@ -170,7 +170,7 @@ def drift(carried):
 
     sim.run(on_frame=frame, frame_times=[1.0 / xi, t_steady, t_steady + t_window])
     (t0, x0, v0), (t1, x1, v1), (t2, x2, _) = rec[:3]
-    u = sim.last_fluid_info.flux_out[0] / WIDTH
+    u = sim.fluid.last_info.flux_out[0] / WIDTH
     v_mean = (x2[0] - x1[0]) / (t2 - t1)
     sp = sim.model.species[0]
     corrected = u * node_area(sp.shape) / sp.shape.area * image_factor(beta_of(sim) * 0.25)

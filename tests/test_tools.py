@@ -53,24 +53,24 @@ def test_interval_study_points_are_the_cells_they_are_labelled_with(monkeypatch)
     run whatever the default): each must be, to a step per half cell, what "auto"
     resolves to at that many cells per solve, and the longest must be accepted."""
     conv = _load("convergence")
-    from taichi_hsdem import Simulation, load_scene, simulation
+    from taichi_hsdem import load_scene
+    from taichi_hsdem import resolve as resolve_module
     vani = ROOT / "scenes" / "vani_phi026.toml"
+
+    def interval(*sets):
+        scene = load_scene(vani, ["run.realizations=1", "fluid.workers=1", *sets])
+        return resolve_module.resolve(scene).scene.fluid.update_interval
+
     steps = [int(round(c / 0.5 * conv.HALF_CELL_STEPS)) for c in conv.INTERVAL_CELLS]
     for cells, k in zip(conv.INTERVAL_CELLS, steps):
-        monkeypatch.setattr(simulation, "UPDATE_CELL_FRACTION", cells)
-        sim = Simulation(load_scene(vani, ["run.realizations=1", 'fluid.workers=1']))
-        sim._update_fluid(force=True)
-        assert abs(sim.scene.fluid.update_interval - k) <= cells / 0.5, (cells, k)
+        monkeypatch.setattr(resolve_module, "UPDATE_CELL_FRACTION", cells)
+        assert abs(interval() - k) <= cells / 0.5, (cells, k)
     monkeypatch.undo()
     # the current default is one of the points, and the escapee study's "auto"
-    sim = Simulation(load_scene(vani, ["run.realizations=1", 'fluid.workers=1']))
-    sim._update_fluid(force=True)
-    assert sim.scene.fluid.update_interval == conv.ESCAPEE_DEFAULTS["fluid.update_interval"]
-    assert sim.scene.fluid.update_interval in steps
-    sim = Simulation(load_scene(vani, ["run.realizations=1", 'fluid.workers=1',
-                                       f"fluid.update_interval={steps[-1]}"]))
-    sim._update_fluid(force=True)          # would refuse an interval over half a diameter
-    assert sim.scene.fluid.update_interval == steps[-1]
+    assert interval() == conv.ESCAPEE_DEFAULTS["fluid.update_interval"]
+    assert interval() in steps
+    # would refuse an interval over half a diameter
+    assert interval(f"fluid.update_interval={steps[-1]}") == steps[-1]
 
 
 def test_timestep_study_quick_writes_its_chart(tmp_path):

@@ -273,7 +273,7 @@ def test_frame_zero_is_the_initial_state_and_the_range_is_fixed(tmp_path):
     sim = Simulation(load_scene(str(HOURGLASS), ["run.t_end=0.5", "output.frames=4",
                                                  "output.width=480"]))
     initial = sim.state()
-    p0 = sim.pressure_np[0]
+    p0 = sim.pressure()[0]
     rec = VideoRecorder(sim, tmp_path / "video.mp4")
     finite = p0[np.isfinite(p0)]
     assert rec.pressure_range == (finite.min(), finite.max())

@@ -103,9 +103,10 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
         ov.append(f"output.frames={video_frames}")
     sim = Simulation(load_scene(scene_path, ov))
     if sim.fluid is not None:
-        sim._update_fluid(force=True)  # run()'s first solve (it sets the update interval)
+        sim.update_fluid(force=True)  # run()'s first solve (it sets the update interval)
     sim.step(5)                      # compile every kernel before timing
-    solves0, fluid_s0, steps0 = sim.fluid_solves, sim.fluid_seconds, sim.steps
+    solves0, fluid_s0 = (sim.fluid.solves, sim.fluid.seconds) if sim.fluid else (0, 0.0)
+    steps0 = sim.steps
     samples = []                     # (simulated time, resident MB): flat over the run?
 
     def progress(t, t_end):
@@ -129,20 +130,21 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
                  "render_share": round(rec.seconds / wall, 3)}
     steps = sim.steps - steps0
     # contact evaluations per step, from the final neighbour lists
-    nbr = sim.nlist.nbr_n.to_numpy().astype(np.int64)
-    alive = sim.alive.to_numpy().astype(bool)
-    nodes = np.array([s.shape.nodes.shape[0] for s in sim.model.species])[sim.sp_np]
+    nbr = sim.neighbors.nbr_n.to_numpy().astype(np.int64)
+    alive = sim.bodies.alive.to_numpy().astype(bool)
+    nodes = np.array([s.shape.nodes.shape[0] for s in sim.model.species])[sim.particles.species_np]
     if sim.model.all_disks:
         evals = int(nbr[alive].sum() + alive.sum())
     else:
-        nb = sim.nlist.nbr.to_numpy()
+        nb = sim.neighbors.nbr.to_numpy()
         evals = 0
         for r in range(sim.R):
             for i in np.flatnonzero(alive[r]):
                 js = nb[r, i, :nbr[r, i]]
                 evals += int(nbr[r, i] * nodes[i] + nodes[js].sum() + nodes[i])
-    solves = (sim.fluid_solves - solves0) * sim.R
-    workers = sim.fluid.workers if sim.fluid is not None else 0
+    solves1, fluid_s1 = (sim.fluid.solves, sim.fluid.seconds) if sim.fluid else (0, 0.0)
+    solves = (solves1 - solves0) * sim.R
+    workers = sim.fluid.solver.workers if sim.fluid is not None else 0
     worker_rss = []
     if workers > 1:
         from taichi_hsdem.fluid import pool as solver_pool
@@ -157,7 +159,7 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
         "contact_evals_per_s": round(evals * steps / wall, 0),
         "realization_sim_s_per_wall_s": round(sim.R * (sim.t - 0.0) / wall, 6),
         "pressure_solves_per_s": round(solves / wall, 2),
-        "pressure_share": round((sim.fluid_seconds - fluid_s0) / wall, 3),
+        "pressure_share": round((fluid_s1 - fluid_s0) / wall, 3),
         "fluid_workers": workers,
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "worker_peak_rss_mb": worker_rss,

@@ -34,12 +34,12 @@ def record(sim_time, seed):
         "fluid.workers=1", f"run.seed={seed}"])
     sim = th.Simulation(scene)
     fields = []
-    solve = sim.fluid.solve
+    solve = sim.fluid.solver.solve
 
     def spy(kappa, *args, **kwargs):
         fields.append(np.array(kappa, copy=True))
         return solve(kappa, *args, **kwargs)
-    sim.fluid.solve = spy
+    sim.fluid.solver.solve = spy
     sim.run()
     m = sim.model
     return fields, (m.fluid_active, m.fluid_dx, scene.fluid.viscosity, m.bc(),

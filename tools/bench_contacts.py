@@ -27,7 +27,7 @@ Reported per case (medians over the repeats):
 ``node_evals_per_s``
     node-vs-level-set evaluations per step / time per step. Counted from the
     neighbour lists actually in use at every step (read from
-    ``sim.nlist.nbr_n`` after every rebuild): on the level-set path each listed
+    ``sim.neighbors.nbr_n`` after every rebuild): on the level-set path each listed
     entry (i, j) evaluates the nodes of i in j *and* the nodes of j in i (the
     kernel evaluates every pair from both sides, so a pair costs 2 (n_i + n_j)),
     plus n_i wall checks per particle; on the disk path one evaluation per listed
@@ -191,25 +191,25 @@ def initial_state(n: int, a: float, lattice, origin, seed: int, case: str):
 class EvalCounter:
     """Node evaluations of the steps taken, from the neighbour lists in use.
 
-    Wraps ``sim._rebuild`` (on this instance only) so that every list the
+    Wraps ``sim.rebuild_neighbors`` (on this instance only) so that every list the
     contact kernel will use is counted for exactly the steps it is used in.
     """
 
     def __init__(self, sim):
         self.sim = sim
         self.level_set = not sim.model.all_disks
-        counts = np.asarray(sim._stack["node_count"])[np.asarray(sim.sp_np)]
+        counts = np.asarray(sim.templates.node_count)[np.asarray(sim.particles.species_np)]
         self.nodes = counts.astype(np.int64)          # nodes of each particle
         self.uniform = bool(np.all(self.nodes == self.nodes[0]))
-        self._orig = sim._rebuild
-        sim._rebuild = self._rebuild
+        self._orig = sim.rebuild_neighbors
+        sim.rebuild_neighbors = self._rebuild
         self.reset()
 
     def _list_stats(self):
         sim = self.sim
-        nbr_n = sim.nlist.nbr_n.to_numpy().astype(np.int64)        # (R, N)
-        alive = sim.alive.to_numpy().astype(bool)
-        running = sim.running.to_numpy().astype(bool)
+        nbr_n = sim.neighbors.nbr_n.to_numpy().astype(np.int64)        # (R, N)
+        alive = sim.bodies.alive.to_numpy().astype(bool)
+        running = sim.batch.running.to_numpy().astype(bool)
         act = alive & running[:, None]
         nbr_n = np.where(act, nbr_n, 0)
         entries = int(nbr_n.sum())
@@ -219,7 +219,7 @@ class EvalCounter:
         elif self.uniform:
             evals = entries * 2 * int(self.nodes[0]) + int(walls.sum())
         else:
-            nbr = sim.nlist.nbr.to_numpy()
+            nbr = sim.neighbors.nbr.to_numpy()
             cap = nbr.shape[2]
             used = np.arange(cap)[None, None, :] < nbr_n[:, :, None]
             nj = np.where(used, self.nodes[np.clip(nbr, 0, len(self.nodes) - 1)], 0)
@@ -256,8 +256,8 @@ def touching_pairs(sim) -> int:
     """Pairs overlapping in the current state (disks exactly, squares by their nodes)."""
     st = sim.state()
     x, th = st["x"][0], st["theta"][0]
-    nbr_n = sim.nlist.nbr_n.to_numpy()[0]
-    nbr = sim.nlist.nbr.to_numpy()[0]
+    nbr_n = sim.neighbors.nbr_n.to_numpy()[0]
+    nbr = sim.neighbors.nbr.to_numpy()[0]
     shape = sim.model.species[0].shape
     count = 0
     if shape.kind == "circle":
@@ -317,8 +317,8 @@ def run_case(case: str, n: int, args, log) -> dict:
 
     def reset():
         sim.set_state(x0, th0, v=v0, omega=w0)
-        sim.bad.fill(0)
-        sim.max_overlap.fill(0)
+        sim.batch.bad.fill(0)
+        sim.batch.max_overlap.fill(0)
 
     counter = EvalCounter(sim)
     reset()
@@ -359,9 +359,9 @@ def run_case(case: str, n: int, args, log) -> dict:
         rebuilds.append(rb)
         if rep == 0:
             touching = touching_pairs(sim)
-            bad = int(sim.bad.to_numpy()[0])
-            overlap = float(sim.max_overlap.to_numpy()[0])
-    sim._rebuild = counter._orig
+            bad = int(sim.batch.bad.to_numpy()[0])
+            overlap = float(sim.batch.max_overlap.to_numpy()[0])
+    sim.rebuild_neighbors = counter._orig
 
     t_med = statistics.median(times)
     ev_step = statistics.median(evals) / k_steps
@@ -378,7 +378,7 @@ def run_case(case: str, n: int, args, log) -> dict:
         "node_evals_per_step": ev_step,
         "contacts_per_particle": statistics.median(entries) / k_steps / n,
         "touching_per_particle": 2.0 * touching / n,
-        "nodes_per_particle": 1 if sim.model.all_disks else int(sim._stack["node_count"][0]),
+        "nodes_per_particle": 1 if sim.model.all_disks else int(sim.templates.node_count[0]),
         "rebuilds_per_1000_steps": 1000.0 * statistics.median(rebuilds) / k_steps,
         "k_steps": k_steps,
         "median_of": args.repeats,
@@ -435,9 +435,9 @@ def profile_step(sim, reset, steps: int) -> dict:
                 patched.append((mod, name, obj))
                 setattr(mod, name, timed(name, obj))
     reset()
-    rebuilds0 = sim.nlist.builds
-    rebuild = sim._rebuild
-    sim._rebuild = timed("rebuild", rebuild)
+    rebuilds0 = sim.neighbors.builds
+    rebuild = sim.rebuild_neighbors
+    sim.rebuild_neighbors = timed("rebuild", rebuild)
     try:
         ti.sync()
         t0 = clock()
@@ -445,13 +445,13 @@ def profile_step(sim, reset, steps: int) -> dict:
         ti.sync()
         total = clock() - t0
     finally:
-        sim._rebuild = rebuild
+        sim.rebuild_neighbors = rebuild
         for mod, name, obj in patched:
             setattr(mod, name, obj)
     prof = {key: val / steps for key, val in acc.items()}
     prof["other"] = (total - sum(acc.values())) / steps
     prof["serialised_total"] = total / steps
-    prof["rebuilds_per_1000_steps"] = 1000.0 * (sim.nlist.builds - rebuilds0) / steps
+    prof["rebuilds_per_1000_steps"] = 1000.0 * (sim.neighbors.builds - rebuilds0) / steps
     prof["steps"] = steps
     return prof
 

@@ -98,7 +98,8 @@ import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
 from taichi_hsdem.backend import ti  # noqa: E402  (sets the environment before Taichi loads)
-from taichi_hsdem.dem.contact import contact_law, cross, spin
+from taichi_hsdem.dem.contact import contact_law
+from taichi_hsdem.dem.kmath import cross, spin
 from taichi_hsdem.laws import restitution_factor  # noqa: E402
 
 vec2 = ti.math.vec2

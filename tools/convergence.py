@@ -38,7 +38,7 @@ solves (3 cells = half a diameter, the longest interval a scene may set); each
 point's mean escapees, its change from the 0.5-cell point with a 95 % bootstrap
 interval, and the wall time, in ``interval.csv`` and ``interval.png``;
 ``interval.json`` adds the points up to the default
-(``simulation.UPDATE_CELL_FRACTION``) pooled against the longer ones.
+(``resolve.UPDATE_CELL_FRACTION``) pooled against the longer ones.
 
 ``escapees``: the clogging statistics of the vani scene (mean escapees before a
 clog, censoring-aware, with its 95 % interval) as one knob at a time moves off its
@@ -104,14 +104,14 @@ def pressure_study(out, quick):
         scene = load_scene(scene_path, [f"fluid.cell_size={1.0 / cpd}"])
         sim = Simulation(scene)
         t0 = time.perf_counter()
-        sim._update_fluid(force=True)          # rebuild + solve, timed alone
+        sim.update_fluid(force=True)          # rebuild + solve, timed alone
         wall = time.perf_counter() - t0
         g = sim.model.geometry
         nx, ny = sim.model.fluid_shape
         dx = sim.model.fluid_dx
         xc = g.x_min + (np.arange(nx) + 0.5) * dx
         yc = g.y_min + (np.arange(ny) + 0.5) * dx
-        fields[cpd] = (xc, yc, sim.pressure_np[0], wall, nx * ny)
+        fields[cpd] = (xc, yc, sim.pressure()[0], wall, nx * ny)
     # compare on the coarsest grid's active cell centres, away from walls by a cell
     xr, yr, pr, _, _ = fields[ref_level]
     ref = RegularGridInterpolator((xr, yr), np.nan_to_num(pr, nan=np.nan), bounds_error=False)
@@ -385,7 +385,7 @@ def paper_study(out, quick, realizations=None):
 
 
 # Fluid cells a particle at the constriction's mean speed crosses between solves
-# (simulation.UPDATE_CELL_FRACTION is one of them); 164 steps is half a cell in the
+# (resolve.UPDATE_CELL_FRACTION is one of them); 164 steps is half a cell in the
 # vani scene at the auto time step, so the intervals are multiples of it. Given as
 # steps (not "auto") so that a point's folder stays the same run whatever the
 # default is.
@@ -415,7 +415,7 @@ def interval_study(out, quick, realizations=None):
     csv_path = _write(out, "interval", header, rows)
     # the points up to the default pooled against the longer ones: is there a change
     # beyond the default that one point's sample is too small to show?
-    from taichi_hsdem.simulation import UPDATE_CELL_FRACTION
+    from taichi_hsdem.resolve import UPDATE_CELL_FRACTION
 
     def pool(sel):
         return ([s for c, pt in zip(INTERVAL_CELLS, pts) if sel(c) for s in pt["escapees"]],

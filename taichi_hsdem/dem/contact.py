@@ -32,85 +32,10 @@ pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
 """
 
 from ..backend import ti  # sets the environment before Taichi loads
+from .kmath import cross, node_world, rot, rot_t, spin, template_sample, wall_sample
+from .layout import BAD_PASSED, F_HISTORY_OVERFLOW, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
 
 vec2 = ti.math.vec2
-
-# Realization status bit set here (integrate.py sets 1 and 2).
-BAD_PASSED = 4
-# Per-pair material table, last axis: kn, ks, mu, c_e (restitution factor).
-PAIR_KN, PAIR_KS, PAIR_MU, PAIR_CE = 0, 1, 2, 3
-# Scalar parameters passed in one small array so that changing them never recompiles.
-P_DT, P_NORMALIZE, P_WALL_OX, P_WALL_OY, P_WALL_H = 0, 1, 2, 3, 4
-N_PARAMS = 5
-BIG = 1.0e30
-
-
-@ti.func
-def rot(c, s, v):
-    return vec2(c * v.x - s * v.y, s * v.x + c * v.y)
-
-
-@ti.func
-def rot_t(c, s, v):
-    return vec2(c * v.x + s * v.y, -s * v.x + c * v.y)
-
-
-@ti.func
-def cross(a, b):
-    return a.x * b.y - a.y * b.x
-
-
-@ti.func
-def spin(w, r):
-    """Velocity ``w x r`` of a point at ``r`` from the centre of a body spinning at ``w``."""
-    return vec2(-w * r.y, w * r.x)
-
-
-@ti.func
-def grid_sample(data: ti.template(), gdata: ti.template(), off, nx, ny, ox, oy, h, q):
-    """Bilinear value and gradient of a grid stored x-first from ``data[off]``.
-
-    The gradient is the bilinear interpolation of the grid's central-difference
-    gradient ``gdata`` (continuous and second-order), not the gradient of the
-    bilinear value, which jumps between cells and tilts contact normals by O(h/r)
-    next to grid lines. Outside the grid the value is ``BIG`` (no contact) and
-    the gradient zero.
-    """
-    phi = BIG
-    grad = vec2(0.0, 0.0)
-    gx = (q.x - ox) / h
-    gy = (q.y - oy) / h
-    if gx >= 0.0 and gy >= 0.0 and gx < nx - 1 and gy < ny - 1:
-        i0 = ti.cast(ti.floor(gx), ti.i32)
-        j0 = ti.cast(ti.floor(gy), ti.i32)
-        fx = gx - i0
-        fy = gy - j0
-        k00 = off + i0 * ny + j0
-        k10 = k00 + ny
-        w00 = (1 - fx) * (1 - fy)
-        w10 = fx * (1 - fy)
-        w01 = (1 - fx) * fy
-        w11 = fx * fy
-        phi = data[k00] * w00 + data[k10] * w10 + data[k00 + 1] * w01 + data[k10 + 1] * w11
-        for c in ti.static(range(2)):
-            grad[c] = (gdata[k00, c] * w00 + gdata[k10, c] * w10 + gdata[k00 + 1, c] * w01
-                       + gdata[k10 + 1, c] * w11)
-    return phi, grad
-
-
-@ti.func
-def template_sample(ls_phi: ti.template(), ls_grad: ti.template(), ls_meta: ti.template(),
-                    ls_geo: ti.template(), t, q):
-    """Level set of template ``t`` and its gradient at body-frame point ``q``."""
-    phi, g = grid_sample(ls_phi, ls_grad, ls_meta[t, 0], ls_meta[t, 1], ls_meta[t, 2],
-                         ls_geo[t, 0], ls_geo[t, 1], ls_geo[t, 2], q)
-    return phi, g
-
-
-@ti.func
-def node_world(node_pos: ti.template(), n, x, c, s):
-    """World position of surface node ``n`` of a body at ``x`` turned by (c, s)."""
-    return x + rot(c, s, vec2(node_pos[n, 0], node_pos[n, 1]))
 
 
 @ti.func
@@ -146,31 +71,25 @@ def store_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.templat
             hs[r, i, k, s] = fs
             stored = 1
     if stored == 0:
-        flags[1] += 1  # history overflow: contact force kept, its history dropped
-
-
-@ti.func
-def wall_depth(wall: ti.template(), wall_grad: ti.template(), wall_meta: ti.template(),
-               prm: ti.template(), p):
-    """Wall level set (positive in the fluid) and its gradient at world point ``p``."""
-    phi, g = grid_sample(wall, wall_grad, 0, wall_meta[0], wall_meta[1],
-                         prm[P_WALL_OX], prm[P_WALL_OY], prm[P_WALL_H], p)
-    return phi, g
+        flags[F_HISTORY_OVERFLOW] += 1  # contact force kept, its history dropped
 
 
 @ti.kernel
 def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray(),
                 w: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray(),
                 alive: ti.types.ndarray(), running: ti.types.ndarray(),
+                bad: ti.types.ndarray(), max_overlap: ti.types.ndarray(),
                 nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
-                sp: ti.types.ndarray(), tm: ti.types.ndarray(), mass: ti.types.ndarray(),
-                deq: ti.types.ndarray(), pair: ti.types.ndarray(), wallp: ti.types.ndarray(),
-                ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(), ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
+                sp: ti.types.ndarray(), mass: ti.types.ndarray(), deq: ti.types.ndarray(),
+                pair: ti.types.ndarray(), wallp: ti.types.ndarray(),
+                ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(),
+                ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
                 node_pos: ti.types.ndarray(), node_meta: ti.types.ndarray(),
-                wall: ti.types.ndarray(), wall_grad: ti.types.ndarray(), wall_meta: ti.types.ndarray(), hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
-                hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(),
-                prm: ti.types.ndarray(), max_overlap: ti.types.ndarray(), flags: ti.types.ndarray(),
-                bad: ti.types.ndarray(), slots: ti.template()):
+                wall: ti.types.ndarray(), wall_grad: ti.types.ndarray(),
+                wall_shape: ti.types.ndarray(), wall_ox: float, wall_oy: float, wall_h: float,
+                hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
+                hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(), slots: ti.template(),
+                flags: ti.types.ndarray(), dt: float, normalize: ti.i32):
     """Add every contact force and moment acting on each body (level-set path).
 
     A body whose centre lies inside a neighbour has passed through it between
@@ -178,12 +97,10 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
     flagged ``BAD_PASSED`` rather than allowed to go on with bodies inside bodies.
     """
     n_part = x.shape[1]
-    dt = prm[P_DT]
-    normalize = prm[P_NORMALIZE] > 0.5
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
         if running[r] == 0 or alive[r, i] == 0:
             continue
-        ti_ = tm[i]
+        ti_ = sp[i]
         xi = x[r, i]
         ci = ti.cos(th[r, i])
         si = ti.sin(th[r, i])
@@ -201,7 +118,7 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             j = nbr[r, i, q]
             if alive[r, j] == 0:
                 continue
-            tj = tm[j]
+            tj = sp[j]
             xj = x[r, j]
             cj = ti.cos(th[r, j])
             sj = ti.sin(th[r, j])
@@ -251,7 +168,7 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                     fb -= fn + fs
                     mb -= cross(p - xi, fn + fs)
                     nb += 1
-            if normalize:
+            if normalize != 0:
                 if na > 0:
                     fa /= na
                     ma /= na
@@ -274,7 +191,7 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
         nw = 0
         for k in range(nn_i):
             p = node_world(node_pos, noff_i + k, xi, ci, si)
-            phi, g = wall_depth(wall, wall_grad, wall_meta, prm, p)
+            phi, g = wall_sample(wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h, p)
             if phi < 0.0 and g.norm() > 0.0:
                 nrm = g.normalized()
                 u = vi + spin(wi, p - xi)
@@ -285,7 +202,7 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                 mw += cross(p - xi, fn + fs)
                 nw += 1
                 deepest = ti.max(deepest, -phi / deq[i])
-        if normalize and nw > 0:
+        if normalize != 0 and nw > 0:
             fw /= nw
             mw /= nw
         f[r, i] += ftot + fw
@@ -295,16 +212,16 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
 
 @ti.kernel
 def disk_contacts(x: ti.types.ndarray(), v: ti.types.ndarray(), w: ti.types.ndarray(),
-                  f: ti.types.ndarray(), tau: ti.types.ndarray(),
-                  alive: ti.types.ndarray(), running: ti.types.ndarray(),
+                  f: ti.types.ndarray(), tau: ti.types.ndarray(), alive: ti.types.ndarray(),
+                  running: ti.types.ndarray(), max_overlap: ti.types.ndarray(),
                   nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
                   sp: ti.types.ndarray(), rad: ti.types.ndarray(), mass: ti.types.ndarray(),
                   pair: ti.types.ndarray(), wallp: ti.types.ndarray(), wall: ti.types.ndarray(),
-                  wall_grad: ti.types.ndarray(), wall_meta: ti.types.ndarray(),
+                  wall_grad: ti.types.ndarray(), wall_shape: ti.types.ndarray(),
+                  wall_ox: float, wall_oy: float, wall_h: float,
                   hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
-                  hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(),
-                  prm: ti.types.ndarray(), max_overlap: ti.types.ndarray(), flags: ti.types.ndarray(),
-                  slots: ti.template()):
+                  hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(), slots: ti.template(),
+                  flags: ti.types.ndarray(), dt: float):
     """Add every contact force and moment on each disk (analytic fast path).
 
     The pair is evaluated by both disks, each keeping its own copy of the shear
@@ -315,8 +232,9 @@ def disk_contacts(x: ti.types.ndarray(), v: ti.types.ndarray(), w: ti.types.ndar
         if running[r] == 0 or alive[r, i] == 0:
             continue
         ftot, mtot, deepest = disk_force(x, v, w, alive, nbr, nbr_n, sp, rad, mass, pair,
-                                         wallp, wall, wall_grad, wall_meta, hp_old, hs_old,
-                                         hp_new, hs_new, prm, flags, slots, r, i)
+                                         wallp, wall, wall_grad, wall_shape, wall_ox, wall_oy,
+                                         wall_h, hp_old, hs_old, hp_new, hs_new, slots, flags,
+                                         dt, r, i)
         f[r, i] += ftot
         tau[r, i] += mtot
         ti.atomic_max(max_overlap[r], deepest)
@@ -327,14 +245,13 @@ def disk_force(x: ti.template(), v: ti.template(), w: ti.template(), alive: ti.t
                nbr: ti.template(), nbr_n: ti.template(), sp: ti.template(),
                rad: ti.template(), mass: ti.template(), pair: ti.template(),
                wallp: ti.template(), wall: ti.template(), wall_grad: ti.template(),
-               wall_meta: ti.template(), hp_old: ti.template(), hs_old: ti.template(),
-               hp_new: ti.template(), hs_new: ti.template(), prm: ti.template(),
-               flags: ti.template(), slots: ti.template(), r, i):
+               wall_shape: ti.template(), wall_ox, wall_oy, wall_h,
+               hp_old: ti.template(), hs_old: ti.template(), hp_new: ti.template(),
+               hs_new: ti.template(), slots: ti.template(), flags: ti.template(), dt, r, i):
     """Contact force, moment and deepest overlap (fraction of d) on disk ``i`` of
     realization ``r`` from its listed neighbours and the walls; writes its new
     shear history."""
     n_part = x.shape[1]
-    dt = prm[P_DT]
     for s in ti.static(range(slots)):
         hp_new[r, i, 0, s] = 0
     xi = x[r, i]
@@ -368,7 +285,7 @@ def disk_force(x: ti.template(), v: ti.template(), w: ti.template(), alive: ti.t
             ftot += fn + fs
             mtot += cross(ra, fs)
             deepest = ti.max(deepest, depth / (2.0 * ri))
-    phi, g = wall_depth(wall, wall_grad, wall_meta, prm, xi)
+    phi, g = wall_sample(wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h, xi)
     depth = ri - phi
     if depth > 0.0 and g.norm() > 0.0:
         nrm = g.normalized()
@@ -385,3 +302,26 @@ def disk_force(x: ti.template(), v: ti.template(), w: ti.template(), alive: ti.t
         mtot += cross(ra, fs)
         deepest = ti.max(deepest, depth / (2.0 * ri))
     return ftot, mtot, deepest
+
+
+def add_forces(bodies, batch, particles, materials, templates, walls, history, neighbors,
+               flags, dt: float, normalize: bool, disks: bool):
+    """Add every contact force and moment to ``bodies.force``/``torque``: the
+    analytic disk law when ``disks`` (every particle a circle), else the level-set
+    node law; writes the new shear history (``history.new``) and the deepest
+    overlap of each realization (``batch.max_overlap``)."""
+    (hp_old, hs_old), (hp_new, hs_new) = history.old, history.new
+    b, p, m, wg, nl = bodies, particles, materials, walls, neighbors
+    wall = (wg.phi, wg.grad, wg.shape, wg.origin[0], wg.origin[1], wg.spacing)
+    if disks:
+        disk_contacts(b.x, b.v, b.omega, b.force, b.torque, b.alive, batch.running,
+                      batch.max_overlap, nl.nbr, nl.nbr_n, p.species, p.radius, p.mass,
+                      m.pair, m.wall, *wall, hp_old, hs_old, hp_new, hs_new, history.slots,
+                      flags, dt)
+    else:
+        t = templates
+        ls_contacts(b.x, b.theta, b.v, b.omega, b.force, b.torque, b.alive, batch.running,
+                    batch.bad, batch.max_overlap, nl.nbr, nl.nbr_n, p.species, p.mass,
+                    p.d_eq, m.pair, m.wall, t.ls_phi, t.ls_grad, t.ls_meta, t.ls_geo,
+                    t.node_pos, t.node_meta, *wall, hp_old, hs_old, hp_new, hs_new,
+                    history.slots, flags, dt, int(normalize))

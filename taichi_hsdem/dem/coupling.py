@@ -10,25 +10,24 @@
   sum to exactly zero, so a uniform pressure pushes no body anywhere, and in a
   linear pressure field the force is exactly the pressure drop across the node
   polygon's area (divergence theorem) — the property a test checks.
+
+:class:`FluidCoupling` owns the fluid arrays of a batch (permeability, carried
+flux, pressure) and the :class:`~taichi_hsdem.fluid.PressureSolver`; the host
+calls :meth:`FluidCoupling.update` every ``fluid.update_interval`` steps.
 """
 
-import numpy as np
-from ..backend import ti  # sets the environment before Taichi loads
+import time
 
-from .contact import cross, node_world, rot, rot_t, spin, template_sample
+import numpy as np
+
+from .. import backend
+from ..backend import ti  # sets the environment before Taichi loads
+from ..fluid import PressureSolver
+from . import state
+from .kmath import cross, node_world, rot, rot_t, spin, template_sample
+from .layout import SAMPLING
 
 vec2 = ti.math.vec2
-
-# fluid grid parameters (real array)
-FG_OX, FG_OY, FG_DX, FG_GAP, FG_SAMPLING = 0, 1, 2, 3, 4
-N_FGPARAMS = 5
-SAMPLING = {"bilinear": 0, "cell": 1}
-
-
-def boundary_vectors(nodes: np.ndarray) -> np.ndarray:
-    """Outward boundary vectors ``a_k`` (length times normal) of a closed CCW node loop."""
-    chord = np.roll(nodes, -1, axis=0) - np.roll(nodes, 1, axis=0)
-    return 0.5 * np.stack([chord[:, 1], -chord[:, 0]], axis=1)
 
 
 @ti.func
@@ -47,20 +46,17 @@ def inside_body(tm, is_circle: ti.template(), trad: ti.template(), ls_phi: ti.te
 @ti.kernel
 def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
                            alive: ti.types.ndarray(), sp: ti.types.ndarray(),
-                           tm: ti.types.ndarray(), rb: ti.types.ndarray(),
-                           kp: ti.types.ndarray(), is_circle: ti.types.ndarray(),
-                           trad: ti.types.ndarray(), ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(),
+                           rb: ti.types.ndarray(), kp: ti.types.ndarray(),
+                           is_circle: ti.types.ndarray(), trad: ti.types.ndarray(),
+                           ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(),
                            ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
                            base: ti.types.ndarray(), kappa: ti.types.ndarray(),
-                           fg: ti.types.ndarray(), vs: ti.types.ndarray(),
-                           ws: ti.types.ndarray(), carried: ti.types.ndarray()):
+                           vs: ti.types.ndarray(), ws: ti.types.ndarray(),
+                           carried: ti.types.ndarray(), ox: float, oy: float, h: float):
     """Permeability of every fluid cell, and ``chi v``: the velocity of the particle
     a cell's centre lies in (``vs + ws x r``), zero outside particles."""
     nx = base.shape[0]
     ny = base.shape[1]
-    ox = fg[FG_OX]
-    oy = fg[FG_OY]
-    h = fg[FG_DX]
     for r, cx, cy in kappa:
         kappa[r, cx, cy] = base[cx, cy]
         carried[r, cx, cy] = vec2(0.0, 0.0)
@@ -78,7 +74,7 @@ def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
             for b in range(j0, j1 + 1):
                 if base[a, b] > 0.0:
                     centre = vec2(ox + (a + 0.5) * h, oy + (b + 0.5) * h)
-                    if inside_body(tm[i], is_circle, trad, ls_phi, ls_grad, ls_meta, ls_geo,
+                    if inside_body(sp[i], is_circle, trad, ls_phi, ls_grad, ls_meta, ls_geo,
                                    rot_t(c, s, centre - xi)):
                         ti.atomic_min(kappa[r, a, b], kp[sp[i]])
                         carried[r, a, b] = vs[r, i] + spin(ws[r, i], centre - xi)
@@ -124,16 +120,12 @@ def sample_pressure(pres: ti.template(), active: ti.template(), r, p, ox, oy, h,
 @ti.kernel
 def pressure_forces(x: ti.types.ndarray(), th: ti.types.ndarray(),
                     alive: ti.types.ndarray(), running: ti.types.ndarray(),
-                    tm: ti.types.ndarray(), node_pos: ti.types.ndarray(),
+                    sp: ti.types.ndarray(), node_pos: ti.types.ndarray(),
                     node_area: ti.types.ndarray(), node_meta: ti.types.ndarray(),
                     pres: ti.types.ndarray(), active: ti.types.ndarray(),
-                    fg: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray()):
+                    f: ti.types.ndarray(), tau: ti.types.ndarray(), ox: float, oy: float,
+                    h: float, gap: float, mode: ti.i32):
     """Set ``f``, ``tau`` of every body to its pressure force and moment."""
-    ox = fg[FG_OX]
-    oy = fg[FG_OY]
-    h = fg[FG_DX]
-    gap = fg[FG_GAP]
-    mode = ti.cast(fg[FG_SAMPLING], ti.i32)
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
         fsum = vec2(0.0, 0.0)
         msum = 0.0
@@ -141,8 +133,8 @@ def pressure_forces(x: ti.types.ndarray(), th: ti.types.ndarray(),
             xi = x[r, i]
             c = ti.cos(th[r, i])
             s = ti.sin(th[r, i])
-            off = node_meta[tm[i], 0]
-            for k in range(node_meta[tm[i], 1]):
+            off = node_meta[sp[i], 0]
+            for k in range(node_meta[sp[i], 1]):
                 p = node_world(node_pos, off + k, xi, c, s)
                 sigma = sample_pressure(pres, active, r, p, ox, oy, h, mode)
                 df = -sigma * gap * rot(c, s, vec2(node_area[off + k, 0], node_area[off + k, 1]))
@@ -159,3 +151,119 @@ def load_forces(f: ti.types.ndarray(), tau: ti.types.ndarray(), f0: ti.types.nda
     for r, i in f:
         f[r, i] = f0[r, i]
         tau[r, i] = tau0[r, i]
+
+
+class FluidCoupling:
+    """The fluid side of a batch: permeability, carried flux and pressure arrays
+    (``(R, nx, ny)``, x-first) and the pressure solver.
+
+    Parameters
+    ----------
+    model : Model
+        The resolved set-up (its fluid grid, boundary condition, solver settings).
+    n_real, n_part : int
+        Realizations and particles per realization.
+    """
+
+    def __init__(self, model, n_real: int, n_part: int):
+        fl = model.scene.fluid
+        g = model.geometry
+        nx, ny = model.fluid_shape
+        shape = (n_real, nx, ny)
+        self.model = model
+        self.solver = PressureSolver(model.fluid_active, model.fluid_dx, model.fluid_dx,
+                                     fl.viscosity, model.bc(), n_batch=n_real,
+                                     tol=fl.solver_tol, gap=fl.gap,
+                                     workers=model.fluid_workers)
+        self.active = state.array(model.fluid_active.astype(np.int32), ti.i32)
+        self.base = state.array(np.where(model.fluid_active, model.kappa_free, 0.0))
+        self.kappa = state._zeros(shape)
+        self.carried = state._zeros(shape, vector=True)
+        self.pres = state._zeros(shape)
+        # particle velocities the carried flux uses (see _source_velocities)
+        self.v_src = np.zeros((n_real, n_part, 2))
+        self.w_src = np.zeros((n_real, n_part))
+        self.vs = state._zeros((n_real, n_part), vector=True)
+        self.ws = state._zeros((n_real, n_part))
+        self.grid = (float(g.x_min), float(g.y_min), float(model.fluid_dx))
+        self.gap = float(fl.gap)
+        self.sampling = SAMPLING[fl.pressure_sampling]
+        self.pressure = np.full(shape, np.nan)     # the last solve's, Pa (NaN: walls)
+        self.last_info = None                      # its SolveInfo
+        self._kappa_solved = None
+        self.updates = 0
+        self.solves = 0
+        self.seconds = 0.0
+
+    def apply_forces(self, bodies, batch, particles, templates):
+        """Set every body's held fluid force and moment from the last pressure."""
+        b, t = bodies, templates
+        pressure_forces(b.x, b.theta, b.alive, batch.running, particles.species, t.node_pos,
+                        t.node_area, t.node_meta, self.pres, self.active, b.f_fluid,
+                        b.tau_fluid, *self.grid, self.gap, self.sampling)
+
+    def forget_velocity(self, r: int, i: int):
+        """Body ``i`` of realization ``r`` was re-inserted: it carries no flux yet."""
+        self.v_src[r, i] = 0.0
+        self.w_src[r, i] = 0.0
+
+    def _source_velocities(self, bodies):
+        """Velocities of the carried flux: each particle's current velocity averaged
+        half-and-half with the one used at the previous solve. The pressure lags the
+        particles by a whole update interval while they relax to their drift within
+        1/xi; with the raw velocity the lagged loop v -> 2u - v alternates, the
+        half-and-half average lands an isolated particle on u in one solve."""
+        v = bodies.v.to_numpy().astype(float)
+        w = bodies.omega.to_numpy().astype(float)
+        if self.solves == 0:
+            self.v_src, self.w_src = v, w
+        else:
+            self.v_src = 0.5 * (self.v_src + v)
+            self.w_src = 0.5 * (self.w_src + w)
+        self.vs.from_numpy(self.v_src.astype(backend.numpy_real()))
+        self.ws.from_numpy(self.w_src.astype(backend.numpy_real()))
+
+    def update(self, bodies, batch, particles, templates, materials, force: bool = False):
+        """Re-rasterise the permeability and, unless it changed too little
+        (``fluid.resolve_fraction``) and ``force`` is not set, re-solve the
+        pressure; then refresh every body's held fluid force. Returns the
+        :class:`~taichi_hsdem.fluid.SolveInfo` of a solve, or None."""
+        m = self.model
+        flux = m.scene.fluid.particle_flux
+        if flux:
+            self._source_velocities(bodies)
+        b, t = bodies, templates
+        rasterize_permeability(b.x, b.theta, b.alive, particles.species,
+                               particles.bounding_radius, materials.kappa, t.is_circle,
+                               t.radius, t.ls_phi, t.ls_grad, t.ls_meta, t.ls_geo, self.base,
+                               self.kappa, self.vs, self.ws, self.carried, *self.grid)
+        kappa = self.kappa.to_numpy().astype(float)
+        self.updates += 1
+        if not force and self._kappa_solved is not None:
+            frac = m.scene.fluid.resolve_fraction
+            if frac > 0 and not flux:
+                changed = (kappa != self._kappa_solved).sum(axis=(1, 2)) / m.fluid_active.sum()
+                if changed.max() <= frac:
+                    self.apply_forces(bodies, batch, particles, templates)  # same pressure,
+                    return None                                            # moved bodies
+        t0 = time.perf_counter()
+        pres, info = self.solver.solve(
+            kappa, carried=self.carried.to_numpy().astype(float) if flux else None,
+            # a free cell holds kappa_free in the kernels' precision (f32 rounds 0.12
+            # down to 0.1199999973, below the float64 value: compare like with like)
+            occupied=(kappa < float(backend.numpy_real()(m.kappa_free))) & m.fluid_active
+            if flux else None)
+        self.seconds += time.perf_counter() - t0
+        self.solves += 1
+        self._kappa_solved = kappa
+        self.pressure = pres
+        self.last_info = info
+        self.pres.from_numpy(np.nan_to_num(pres, nan=0.0).astype(backend.numpy_real()))
+        self.apply_forces(bodies, batch, particles, templates)
+        return info
+
+    def summary(self) -> dict:
+        """``summary.json``'s ``"fluid"`` entry."""
+        return {"updates": self.updates, "solves": self.solves,
+                "solve_seconds": self.seconds, "grid": list(self.model.fluid_shape),
+                "cell_size": self.model.fluid_dx}

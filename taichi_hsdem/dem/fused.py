@@ -27,7 +27,6 @@ it catch up, so no contact is dropped.
 """
 
 from ..backend import ti  # sets the environment before Taichi loads
-
 from .contact import disk_force
 from .integrate import advance_body
 from .neighbors import bin_one, list_one
@@ -39,15 +38,15 @@ def _forces(x: ti.template(), v: ti.template(), w: ti.template(), f: ti.template
             alive: ti.template(), nbr: ti.template(), nbr_n: ti.template(),
             sp: ti.template(), rad: ti.template(), mass: ti.template(), pair: ti.template(),
             wallp: ti.template(), wall: ti.template(), wall_grad: ti.template(),
-            wall_meta: ti.template(), hp_old: ti.template(), hs_old: ti.template(),
-            hp_new: ti.template(), hs_new: ti.template(), prm: ti.template(),
-            flags: ti.template(), slots: ti.template(), r):
+            wall_shape: ti.template(), wall_ox, wall_oy, wall_h, hp_old: ti.template(),
+            hs_old: ti.template(), hp_new: ti.template(), hs_new: ti.template(),
+            slots: ti.template(), flags: ti.template(), dt, r):
     deepest = 0.0
     for i in range(x.shape[1]):
         if alive[r, i] != 0:
             ftot, mtot, d = disk_force(x, v, w, alive, nbr, nbr_n, sp, rad, mass, pair, wallp,
-                                       wall, wall_grad, wall_meta, hp_old, hs_old, hp_new,
-                                       hs_new, prm, flags, slots, r, i)
+                                       wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h,
+                                       hp_old, hs_old, hp_new, hs_new, slots, flags, dt, r, i)
             f[r, i] = f_fluid[r, i] + ftot
             tau[r, i] = tau_fluid[r, i] + mtot
             deepest = ti.max(deepest, d)
@@ -60,20 +59,20 @@ def disk_steps(n_steps: ti.i32, x: ti.types.ndarray(), th: ti.types.ndarray(),
                tau: ti.types.ndarray(), f_fluid: ti.types.ndarray(),
                tau_fluid: ti.types.ndarray(), f_ext: ti.types.ndarray(),
                tau_ext: ti.types.ndarray(), alive: ti.types.ndarray(),
-               running: ti.types.ndarray(), sp: ti.types.ndarray(), rad: ti.types.ndarray(),
-               mass: ti.types.ndarray(), inertia: ti.types.ndarray(), deq: ti.types.ndarray(),
+               running: ti.types.ndarray(), bad: ti.types.ndarray(),
+               escaped: ti.types.ndarray(), max_overlap: ti.types.ndarray(),
+               sp: ti.types.ndarray(), rad: ti.types.ndarray(), mass: ti.types.ndarray(),
+               inertia: ti.types.ndarray(), deq: ti.types.ndarray(), rb: ti.types.ndarray(),
                xi: ti.types.ndarray(), pair: ti.types.ndarray(), wallp: ti.types.ndarray(),
                wall: ti.types.ndarray(), wall_grad: ti.types.ndarray(),
-               wall_meta: ti.types.ndarray(), hp_a: ti.types.ndarray(),
-               hs_a: ti.types.ndarray(), hp_b: ti.types.ndarray(), hs_b: ti.types.ndarray(),
-               prm: ti.types.ndarray(), iprm: ti.types.ndarray(),
-               max_overlap: ti.types.ndarray(), flags: ti.types.ndarray(),
-               bad: ti.types.ndarray(), escaped: ti.types.ndarray(),
-               x_ref: ti.types.ndarray(), rb: ti.types.ndarray(),
-               cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
-               nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(), grid: ti.types.ndarray(),
-               ncx: ti.i32, ncy: ti.i32, done: ti.types.ndarray(), builds: ti.types.ndarray(),
-               slots: ti.template()):
+               wall_shape: ti.types.ndarray(), wall_ox: float, wall_oy: float,
+               wall_h: float, hp_a: ti.types.ndarray(), hs_a: ti.types.ndarray(),
+               hp_b: ti.types.ndarray(), hs_b: ti.types.ndarray(), slots: ti.template(),
+               x_ref: ti.types.ndarray(), cell_n: ti.types.ndarray(),
+               cell_p: ti.types.ndarray(), nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
+               g_ox: float, g_oy: float, cs: float, skin: float, ncx: ti.i32, ncy: ti.i32,
+               flags: ti.types.ndarray(), done: ti.types.ndarray(),
+               builds: ti.types.ndarray(), dt: float, x_escape: float):
     """Advance every running realization by up to ``n_steps`` steps.
 
     ``done[r]``: the steps realization ``r`` took (``n_steps`` unless it went bad
@@ -92,29 +91,31 @@ def disk_steps(n_steps: ti.i32, x: ti.types.ndarray(), th: ti.types.ndarray(),
             if s % 2 == 0:
                 deepest = ti.max(deepest, _forces(
                     x, v, w, f, tau, f_fluid, tau_fluid, alive, nbr, nbr_n, sp, rad, mass,
-                    pair, wallp, wall, wall_grad, wall_meta, hp_a, hs_a, hp_b, hs_b, prm,
-                    flags, slots, r))
+                    pair, wallp, wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h,
+                    hp_a, hs_a, hp_b, hs_b, slots, flags, dt, r))
             else:
                 deepest = ti.max(deepest, _forces(
                     x, v, w, f, tau, f_fluid, tau_fluid, alive, nbr, nbr_n, sp, rad, mass,
-                    pair, wallp, wall, wall_grad, wall_meta, hp_b, hs_b, hp_a, hs_a, prm,
-                    flags, slots, r))
+                    pair, wallp, wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h,
+                    hp_b, hs_b, hp_a, hs_a, slots, flags, dt, r))
             moved = 0
             for i in range(n_part):
                 if alive[r, i] != 0:
-                    if advance_body(x, th, v, w, f, tau, f_ext, tau_ext, alive, sp, mass,
-                                    inertia, deq, xi, x_ref, iprm, bad, escaped, r, i):
+                    if advance_body(x, th, v, w, f, tau, f_ext, tau_ext, alive, bad, escaped,
+                                    sp, mass, inertia, deq, xi, x_ref, dt, skin, x_escape,
+                                    r, i):
                         moved = 1
             s += 1
             if bad[r] != 0:
                 stop = 1
             elif moved != 0:
                 builds[r] += 1
-                if bin_one(x, alive, running, cell_n, cell_p, grid, ncx, ncy, flags, r):
+                if bin_one(x, alive, running, cell_n, cell_p, g_ox, g_oy, cs, ncx, ncy, flags,
+                           r):
                     stop = 1
                 for i in range(n_part):
                     if list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n,
-                                grid, ncx, ncy, flags, r, i) > nbr.shape[2]:
+                                g_ox, g_oy, cs, skin, ncx, ncy, flags, r, i) > nbr.shape[2]:
                         stop = 1
         done[r] = s
         max_overlap[r] = deepest
@@ -127,3 +128,20 @@ def disk_steps(n_steps: ti.i32, x: ti.types.ndarray(), th: ti.types.ndarray(),
                 else:
                     hp_a[r, i, k, q] = hp_b[r, i, k, q]
                     hs_a[r, i, k, q] = hs_b[r, i, k, q]
+
+
+def run_steps(n: int, bodies, batch, particles, materials, walls, history, neighbors, flags,
+              done, builds, dt: float, x_escape: float):
+    """``n`` steps of every running realization in one launch (module doc); leaves
+    the latest shear history in ``history.old``."""
+    b, p, m, wg, nl = bodies, particles, materials, walls, neighbors
+    (hp_a, hs_a), (hp_b, hs_b) = history.old, history.new
+    disk_steps(n, b.x, b.theta, b.v, b.omega, b.force, b.torque, b.f_fluid, b.tau_fluid,
+               b.f_ext, b.tau_ext, b.alive, batch.running, batch.bad, batch.escaped,
+               batch.max_overlap, p.species, p.radius, p.mass, p.inertia, p.d_eq,
+               p.bounding_radius, m.xi, m.pair, m.wall, wg.phi, wg.grad, wg.shape,
+               wg.origin[0], wg.origin[1], wg.spacing, hp_a, hs_a, hp_b, hs_b, history.slots,
+               nl.x_ref, nl.cell_n, nl.cell_p, nl.nbr, nl.nbr_n, *nl.grid, flags, done, builds,
+               dt, x_escape)
+    if n % 2:
+        history.swap()   # every realization's latest history is now history.old

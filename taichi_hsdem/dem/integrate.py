@@ -13,42 +13,35 @@ for a rebuild). It also counts bodies crossing the escape line and parks them.
 """
 
 from ..backend import ti  # sets the environment before Taichi loads
-
-from .neighbors import F_REBUILD
-
-# per-realization status bits set by kernels
-BAD_NAN, BAD_FAST = 1, 2
-# scalar parameters of this kernel (real array)
-I_DT, I_SKIN, I_XESC = 0, 1, 2
-N_IPARAMS = 3
+from .layout import BAD_FAST, BAD_NAN, F_REBUILD
 
 
 @ti.kernel
-def advance(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray(),
-            w: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray(),
-            f_ext: ti.types.ndarray(), tau_ext: ti.types.ndarray(), alive: ti.types.ndarray(), running: ti.types.ndarray(),
-            sp: ti.types.ndarray(), mass: ti.types.ndarray(), inertia: ti.types.ndarray(),
-            deq: ti.types.ndarray(), xi: ti.types.ndarray(), x_ref: ti.types.ndarray(),
-            prm: ti.types.ndarray(), bad: ti.types.ndarray(), escaped: ti.types.ndarray(),
-            flags: ti.types.ndarray()):
+def advance_kernel(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray(),
+                   w: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray(),
+                   f_ext: ti.types.ndarray(), tau_ext: ti.types.ndarray(),
+                   alive: ti.types.ndarray(), running: ti.types.ndarray(),
+                   bad: ti.types.ndarray(), escaped: ti.types.ndarray(),
+                   sp: ti.types.ndarray(), mass: ti.types.ndarray(), inertia: ti.types.ndarray(),
+                   deq: ti.types.ndarray(), xi: ti.types.ndarray(), x_ref: ti.types.ndarray(),
+                   flags: ti.types.ndarray(), dt: float, skin: float, x_escape: float):
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
         if running[r] == 0 or alive[r, i] == 0:
             continue
-        if advance_body(x, th, v, w, f, tau, f_ext, tau_ext, alive, sp, mass, inertia, deq,
-                        xi, x_ref, prm, bad, escaped, r, i):
+        if advance_body(x, th, v, w, f, tau, f_ext, tau_ext, alive, bad, escaped, sp, mass,
+                        inertia, deq, xi, x_ref, dt, skin, x_escape, r, i):
             flags[F_REBUILD] = 1
 
 
 @ti.func
 def advance_body(x: ti.template(), th: ti.template(), v: ti.template(), w: ti.template(),
                  f: ti.template(), tau: ti.template(), f_ext: ti.template(),
-                 tau_ext: ti.template(), alive: ti.template(), sp: ti.template(),
-                 mass: ti.template(), inertia: ti.template(), deq: ti.template(),
-                 xi: ti.template(), x_ref: ti.template(), prm: ti.template(),
-                 bad: ti.template(), escaped: ti.template(), r, i):
+                 tau_ext: ti.template(), alive: ti.template(), bad: ti.template(),
+                 escaped: ti.template(), sp: ti.template(), mass: ti.template(),
+                 inertia: ti.template(), deq: ti.template(), xi: ti.template(),
+                 x_ref: ti.template(), dt, skin, x_escape, r, i):
     """One step of body ``i`` of realization ``r``; True when it has moved half the
     Verlet skin since the last neighbour build."""
-    dt = prm[I_DT]
     damp = xi[sp[i]] * dt * 0.5
     vn = ((1.0 - damp) * v[r, i] + dt * (f[r, i] + f_ext[r, i]) / mass[i]) / (1.0 + damp)
     wn = ((1.0 - damp) * w[r, i] + dt * (tau[r, i] + tau_ext[r, i]) / inertia[i]) / (1.0 + damp)
@@ -63,8 +56,20 @@ def advance_body(x: ti.template(), th: ti.template(), v: ti.template(), w: ti.te
             ti.atomic_or(bad[r], BAD_FAST)
     else:
         ti.atomic_or(bad[r], BAD_NAN)
-    moved = (xn - x_ref[r, i]).norm() > 0.5 * prm[I_SKIN]
-    if xn.x > prm[I_XESC]:
+    moved = (xn - x_ref[r, i]).norm() > 0.5 * skin
+    if xn.x > x_escape:
         alive[r, i] = 0
         escaped[r] += 1
     return moved
+
+
+def advance(bodies, batch, particles, materials, neighbors, flags, dt: float, skin: float,
+            x_escape: float):
+    """One step of every live body of every running realization (module doc);
+    raises ``flags[F_REBUILD]`` when a body moved half the Verlet ``skin`` since
+    the last neighbour build."""
+    b, p = bodies, particles
+    advance_kernel(b.x, b.theta, b.v, b.omega, b.force, b.torque, b.f_ext, b.tau_ext,
+                   b.alive, batch.running, batch.bad, batch.escaped, p.species, p.mass,
+                   p.inertia, p.d_eq, materials.xi, neighbors.x_ref, flags, dt, skin,
+                   x_escape)

@@ -12,37 +12,35 @@ reproducible.
 """
 
 import numpy as np
+
+from .. import backend
 from ..backend import ti  # sets the environment before Taichi loads
+from .layout import F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD
 
 vec2 = ti.math.vec2
-
-# flags array layout (int32), shared with the other kernels
-F_CELL_OVERFLOW, F_HISTORY_OVERFLOW, F_REBUILD, F_NBR_OVERFLOW = 0, 1, 2, 3
-N_FLAGS = 8
-# grid parameters (real array): origin x, origin y, cell size, skin
-G_OX, G_OY, G_CS, G_SKIN = 0, 1, 2, 3
 
 
 @ti.kernel
 def bin_particles(x: ti.types.ndarray(), alive: ti.types.ndarray(), running: ti.types.ndarray(),
-                  cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
-                  grid: ti.types.ndarray(), ncx: ti.i32, ncy: ti.i32, flags: ti.types.ndarray()):
+                  cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(), ox: float, oy: float,
+                  cs: float, ncx: ti.i32, ncy: ti.i32, flags: ti.types.ndarray()):
     for r in range(x.shape[0]):
-        bin_one(x, alive, running, cell_n, cell_p, grid, ncx, ncy, flags, r)  # (the
+        bin_one(x, alive, running, cell_n, cell_p, ox, oy, cs, ncx, ncy, flags, r)  # (the
         # overflow it returns is for the fused stepper; here flags carries it)
 
 
 @ti.func
-def cell_of(grid: ti.template(), ncx, ncy, p):
-    """Cell (clamped to the grid) holding world point ``p``."""
-    cx = ti.min(ti.max(ti.cast(ti.floor((p.x - grid[G_OX]) / grid[G_CS]), ti.i32), 0), ncx - 1)
-    cy = ti.min(ti.max(ti.cast(ti.floor((p.y - grid[G_OY]) / grid[G_CS]), ti.i32), 0), ncy - 1)
+def cell_of(ox, oy, cs, ncx, ncy, p):
+    """Cell (clamped to the grid) holding world point ``p``; the grid's lower-left
+    corner is (ox, oy), its cells ``cs`` wide."""
+    cx = ti.min(ti.max(ti.cast(ti.floor((p.x - ox) / cs), ti.i32), 0), ncx - 1)
+    cy = ti.min(ti.max(ti.cast(ti.floor((p.y - oy) / cs), ti.i32), 0), ncy - 1)
     return cx, cy
 
 
 @ti.func
 def bin_one(x: ti.template(), alive: ti.template(), running: ti.template(),
-            cell_n: ti.template(), cell_p: ti.template(), grid: ti.template(), ncx, ncy,
+            cell_n: ti.template(), cell_p: ti.template(), ox, oy, cs, ncx, ncy,
             flags: ti.template(), r):
     """Bin the live bodies of realization ``r``, serially (a reproducible order);
     returns 1 if a cell overflowed its capacity."""
@@ -53,7 +51,7 @@ def bin_one(x: ti.template(), alive: ti.template(), running: ti.template(),
     if running[r] != 0:
         for i in range(x.shape[1]):
             if alive[r, i] != 0:
-                cx, cy = cell_of(grid, ncx, ncy, x[r, i])
+                cx, cy = cell_of(ox, oy, cs, ncx, ncy, x[r, i])
                 c = cx * ncy + cy
                 slot = cell_n[r, c]
                 if slot < cap:
@@ -69,29 +67,29 @@ def bin_one(x: ti.template(), alive: ti.template(), running: ti.template(),
 def build_neighbors(x: ti.types.ndarray(), x_ref: ti.types.ndarray(), alive: ti.types.ndarray(),
                     running: ti.types.ndarray(), rb: ti.types.ndarray(),
                     cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
-                    nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
-                    grid: ti.types.ndarray(), ncx: ti.i32, ncy: ti.i32, flags: ti.types.ndarray()):
+                    nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(), ox: float, oy: float,
+                    cs: float, skin: float, ncx: ti.i32, ncy: ti.i32,
+                    flags: ti.types.ndarray()):
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
-        list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n, grid, ncx, ncy,
-                 flags, r, i)  # (the count is for the fused stepper)
+        list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n, ox, oy, cs, skin,
+                 ncx, ncy, flags, r, i)  # (the count is for the fused stepper)
 
 
 @ti.func
 def list_one(x: ti.template(), x_ref: ti.template(), alive: ti.template(),
              running: ti.template(), rb: ti.template(), cell_n: ti.template(),
              cell_p: ti.template(), nbr: ti.template(), nbr_n: ti.template(),
-             grid: ti.template(), ncx, ncy, flags: ti.template(), r, i):
+             ox, oy, cs, skin, ncx, ncy, flags: ti.template(), r, i):
     """Neighbour list of body ``i`` of realization ``r`` from the binned cells;
     returns how many neighbours it found (more than the capacity: overflow)."""
     cap = nbr.shape[2]
     ccap = cell_p.shape[2]
-    skin = grid[G_SKIN]
     nbr_n[r, i] = 0
     x_ref[r, i] = x[r, i]
     count = 0
     if running[r] != 0 and alive[r, i] != 0:
         xi = x[r, i]
-        cx, cy = cell_of(grid, ncx, ncy, xi)
+        cx, cy = cell_of(ox, oy, cs, ncx, ncy, xi)
         for dx, dy in ti.ndrange((-1, 2), (-1, 2)):
             ax = cx + dx
             ay = cy + dy
@@ -127,24 +125,24 @@ class NeighborList:
         Region the bodies live in (bodies outside are binned into edge cells).
     max_radius, skin : float
         Largest bounding radius and the Verlet skin.
-    real : Taichi float type
+    cell_cap, nbr_cap : int
+        Initial capacities: bodies per cell, neighbours per body. Each doubles
+        whenever a build overflows it.
     """
 
-    def __init__(self, n_real, n_part, bbox, max_radius, skin, real):
-        self.real = real
-        self.skin = skin
-        cs = 2.0 * max_radius + skin
-        self.ncx = max(1, int(np.ceil((bbox[1] - bbox[0]) / cs)))
-        self.ncy = max(1, int(np.ceil((bbox[3] - bbox[2]) / cs)))
-        self.grid = ti.ndarray(real, shape=4)
-        self.grid.from_numpy(np.array([bbox[0], bbox[2], cs, skin], dtype=_np(real)))
+    def __init__(self, n_real, n_part, bbox, max_radius, skin, cell_cap=8, nbr_cap=16):
+        self.skin = float(skin)
+        self.cell_size = 2.0 * max_radius + skin
+        self.origin = (float(bbox[0]), float(bbox[2]))
+        self.ncx = max(1, int(np.ceil((bbox[1] - bbox[0]) / self.cell_size)))
+        self.ncy = max(1, int(np.ceil((bbox[3] - bbox[2]) / self.cell_size)))
         self.shape = (n_real, n_part)
-        self.cell_cap = 8
-        self.nbr_cap = 16
+        self.cell_cap = int(cell_cap)
+        self.nbr_cap = int(nbr_cap)
         self.cell_n = ti.ndarray(ti.i32, shape=(n_real, self.ncx * self.ncy))
         self._alloc_cells()
         self._alloc_nbr()
-        self.x_ref = ti.Vector.ndarray(2, real, shape=self.shape)
+        self.x_ref = ti.Vector.ndarray(2, backend.real(), shape=self.shape)
         self.builds = 0
 
     def _alloc_cells(self):
@@ -154,16 +152,25 @@ class NeighborList:
         self.nbr = ti.ndarray(ti.i32, shape=self.shape + (self.nbr_cap,))
         self.nbr_n = ti.ndarray(ti.i32, shape=self.shape)
 
-    def build(self, x, alive, running, rb, flags):
+    @property
+    def grid(self) -> tuple:
+        """The scalars the kernels take: origin x, origin y, cell size, skin, and
+        the cell counts ncx, ncy."""
+        return (self.origin[0], self.origin[1], self.cell_size, self.skin, self.ncx, self.ncy)
+
+    def build(self, bodies, batch, particles, flags):
         """Rebuild, growing the capacities until nothing overflows."""
+        ox, oy, cs, skin, ncx, ncy = self.grid
+        x, alive, running = bodies.x, bodies.alive, batch.running
         while True:
             flags_np = flags.to_numpy()
             flags_np[[F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD]] = 0
             flags.from_numpy(flags_np)
-            bin_particles(x, alive, running, self.cell_n, self.cell_p, self.grid,
-                          self.ncx, self.ncy, flags)
-            build_neighbors(x, self.x_ref, alive, running, rb, self.cell_n, self.cell_p,
-                            self.nbr, self.nbr_n, self.grid, self.ncx, self.ncy, flags)
+            bin_particles(x, alive, running, self.cell_n, self.cell_p, ox, oy, cs, ncx, ncy,
+                          flags)
+            build_neighbors(x, self.x_ref, alive, running, particles.bounding_radius,
+                            self.cell_n, self.cell_p, self.nbr, self.nbr_n, ox, oy, cs, skin,
+                            ncx, ncy, flags)
             got = flags.to_numpy()
             if got[F_CELL_OVERFLOW]:
                 self.cell_cap *= 2
@@ -175,7 +182,3 @@ class NeighborList:
                 continue
             self.builds += 1
             return
-
-
-def _np(real):
-    return np.float64 if real == ti.f64 else np.float32

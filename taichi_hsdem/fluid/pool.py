@@ -8,7 +8,7 @@ hierarchies between solves and receives only the new matrix values, right-hand
 sides and initial guesses.
 
 The workers are started with :mod:`subprocess` (``python -m
-taichi_hsdem.fluid.pool``), not :mod:`multiprocessing`: a spawned multiprocessing
+taichi_hsdem.fluid.worker``), not :mod:`multiprocessing`: a spawned multiprocessing
 child re-imports the user's main script, which runs a script without a
 ``__main__`` guard a second time, and forking a process that runs Taichi's thread
 pool is unsafe. Messages are pickles over the worker's stdin and stdout; the
@@ -138,6 +138,10 @@ def forget(token):
 _CALLS = {"solve_block": solve_block, "forget": forget}
 
 
+# The folder holding the taichi_hsdem package, where ``python -m`` finds it.
+_PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
 def usable_cpus() -> int:
     """CPUs this process may run on."""
     try:
@@ -152,9 +156,8 @@ class _Worker:
                    MKL_NUM_THREADS="1")
         try:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "taichi_hsdem.fluid.pool"], stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE, env=env, cwd=os.path.dirname(os.path.dirname(
-                    os.path.abspath(__file__))))
+                [sys.executable, "-m", "taichi_hsdem.fluid.worker"], stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE, env=env, cwd=_PACKAGE_PARENT)
         except OSError as exc:
             raise PoolError(f"could not start a pressure-solver process: {exc}") from exc
 
@@ -241,7 +244,7 @@ def pool() -> Pool:
     return _POOL
 
 
-def _serve():
+def serve():
     """Worker loop: answer ``(name, args)`` pickles on stdin until it closes."""
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # nothing but replies may reach the parent's pipe
@@ -256,7 +259,3 @@ def _serve():
             reply = (False, traceback.format_exc())
         pickle.dump(reply, stdout, protocol=pickle.HIGHEST_PROTOCOL)
         stdout.flush()
-
-
-if __name__ == "__main__":
-    _serve()

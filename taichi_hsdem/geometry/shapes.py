@@ -310,6 +310,24 @@ def polygon(vertices, n_nodes=40) -> Shape:
 # ---------------------------------------------------------------------------
 
 
+def boundary_vectors(nodes: np.ndarray) -> np.ndarray:
+    """Outward boundary vectors ``a_k`` (length times normal) of a closed CCW node
+    loop: half the chord between a node's two neighbours, turned outwards.
+
+    They sum to exactly zero over the loop (a uniform pressure pushes no body), and
+    ``sum_k f(p_k) a_k`` integrates a linear ``f`` over the node polygon's outline
+    exactly (the divergence theorem).
+
+    Examples
+    --------
+    >>> a = boundary_vectors(square(2.0, 4).nodes)
+    >>> a.sum(axis=0).tolist(), float((square(2.0, 4).nodes[:, 0] * a[:, 0]).sum())
+    ([0.0, 0.0], 4.0)
+    """
+    chord = np.roll(nodes, -1, axis=0) - np.roll(nodes, 1, axis=0)
+    return 0.5 * np.stack([chord[:, 1], -chord[:, 0]], axis=1)
+
+
 def signed_distance(shape, points) -> np.ndarray:
     """Exact signed distance from points to a shape's outline, negative inside.
 

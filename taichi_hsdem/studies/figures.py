@@ -183,11 +183,6 @@ def bounding_diameter(scene: Scene, species: int = 0) -> float:
     return 2.0 * species_shape(scene.particles[species]).bounding_radius
 
 
-def _species_shape(scene: Scene, species: int = 0):
-    from ..resolve import species_shape
-    return species_shape(scene.particles[species])
-
-
 def quick_overrides(scene: Scene, level_set: bool) -> list[str]:
     """What ``--quick`` sets on a base scene (see the module notes)."""
     d_b = bounding_diameter(scene)

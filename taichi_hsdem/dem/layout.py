@@ -1,0 +1,31 @@
+"""What the integers in the kernels' shared arrays mean: flag bits, counter slots
+and table columns, in one place for the kernels and the host.
+
+* ``Batch.bad[r]``: bits a kernel sets when realization ``r`` can no longer be
+  trusted (the host stops it and reports why).
+* ``flags[F_*]``: batch-wide counters and requests (int32).
+* ``Materials.pair[a, b, PAIR_*]`` and ``Materials.wall[a, PAIR_*]``: the contact law
+  of a species pair and of a species against the walls.
+* ``SAMPLING``: how a surface node reads the pressure (``fluid.pressure_sampling``).
+"""
+
+# Batch.bad bits.
+BAD_NAN = 1       # a non-finite position or velocity
+BAD_FAST = 2      # a body moved more than a quarter of its size in one step
+BAD_PASSED = 4    # a body's inside point ended up inside another body
+
+# flags slots.
+F_CELL_OVERFLOW = 0     # a cell of the cell list held more bodies than its capacity
+F_HISTORY_OVERFLOW = 1  # contacts whose shear history had no free slot (counted)
+F_REBUILD = 2           # some body moved half the Verlet skin: rebuild the lists
+F_NBR_OVERFLOW = 3      # a body had more neighbours than the list's capacity
+N_FLAGS = 4
+
+# Columns of the contact-law tables.
+PAIR_KN, PAIR_KS, PAIR_MU, PAIR_CE = 0, 1, 2, 3
+N_PAIR = 4
+
+SAMPLING = {"bilinear": 0, "cell": 1}
+
+# A level set's value outside its grid: far from the body, no contact.
+OUTSIDE = 1.0e30

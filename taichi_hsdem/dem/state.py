@@ -1,0 +1,245 @@
+"""The Taichi arrays of a batch of realizations, in bundles named for what they hold.
+
+Built on the host from the resolved :class:`~taichi_hsdem.resolve.Model`; the
+kernel modules' wrappers (``contact.add_forces``, ``integrate.advance``, ...)
+take these bundles and hand their arrays to the kernels.
+
+* :class:`Bodies`: the state of every body, ``(R, N)`` (realization, particle).
+* :class:`Batch`: per-realization status, ``(R,)``.
+* :class:`Particles`: what is constant per particle, ``(N,)`` (the same in every
+  realization).
+* :class:`Materials`: the contact law of every species pair and of every species
+  against the walls, per-species damping and permeability.
+* :class:`Templates`: every shape template's level-set grid, stacked in one flat
+  array with per-template offset, shape and spacing, and its surface nodes.
+* :class:`WallGrid`: the walls' level set.
+* :class:`ShearHistory`: the double-buffered shear of every contact.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import backend
+from ..backend import ti
+from ..geometry import shapes as shp
+from ..resolve import pair_table, wall_table
+from . import layout
+
+LS_HISTORY_SLOTS = 3          # contacts one surface node can remember at once
+DISK_HISTORY_SLOTS = 8        # contacts one disk can remember at once
+
+
+def array(data, dtype=None):
+    """A Taichi ndarray holding ``data`` (real numbers unless ``dtype`` = ti.i32)."""
+    real = backend.real()
+    dtype = real if dtype is None else dtype
+    data = np.ascontiguousarray(data)
+    a = ti.ndarray(dtype, shape=data.shape)
+    a.from_numpy(data.astype(backend.numpy_real() if dtype is real else np.int32))
+    return a
+
+
+def _zeros(shape, dtype=None, vector=False):
+    real = backend.real()
+    a = (ti.Vector.ndarray(2, real, shape=shape) if vector
+         else ti.ndarray(real if dtype is None else dtype, shape=shape))
+    a.fill(0)
+    return a
+
+
+def _grid_gradient(phi: np.ndarray, h: float) -> np.ndarray:
+    """Central-difference gradient of an x-first grid, flattened to (nx*ny, 2)."""
+    gx, gy = np.gradient(phi, h)
+    return np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+
+@dataclass
+class Bodies:
+    """State of every body, ``(R, N)``; ``force``/``torque`` are the last step's
+    resultants, ``f_fluid``/``tau_fluid`` the pressure force held between
+    evaluations, ``f_ext``/``tau_ext`` external loads (zero unless set)."""
+    x: object
+    theta: object
+    v: object
+    omega: object
+    force: object
+    torque: object
+    f_fluid: object
+    tau_fluid: object
+    f_ext: object
+    tau_ext: object
+    alive: object
+
+    @classmethod
+    def zeros(cls, R: int, N: int) -> "Bodies":
+        shape = (R, N)
+        return cls(x=_zeros(shape, vector=True), theta=_zeros(shape),
+                   v=_zeros(shape, vector=True), omega=_zeros(shape),
+                   force=_zeros(shape, vector=True), torque=_zeros(shape),
+                   f_fluid=_zeros(shape, vector=True), tau_fluid=_zeros(shape),
+                   f_ext=_zeros(shape, vector=True), tau_ext=_zeros(shape),
+                   alive=_zeros(shape, ti.i32))
+
+
+@dataclass
+class Batch:
+    """Per realization, ``(R,)``: ``running`` (1 while it runs), ``escaped`` (bodies
+    past the escape line), ``bad`` (``layout.BAD_*`` bits), ``max_overlap``
+    (deepest overlap since the last check, fraction of d_eq)."""
+    running: object
+    escaped: object
+    bad: object
+    max_overlap: object
+
+    @classmethod
+    def start(cls, R: int) -> "Batch":
+        return cls(running=array(np.ones(R, dtype=np.int32), ti.i32),
+                   escaped=_zeros(R, ti.i32), bad=_zeros(R, ti.i32), max_overlap=_zeros(R))
+
+
+@dataclass
+class Particles:
+    """Constant per particle, ``(N,)``: species (which is also the shape template's
+    index: one template per species), mass, moment of inertia, equivalent
+    diameter, disk radius (the analytic path) and bounding radius."""
+    species: object
+    mass: object
+    inertia: object
+    d_eq: object
+    radius: object
+    bounding_radius: object
+    species_np: np.ndarray
+
+    @classmethod
+    def of(cls, model) -> "Particles":
+        spp = model.species_of_particle
+        sp = model.species
+
+        def per_particle(value):
+            return array(np.array([value(sp[k]) for k in spp]))
+
+        return cls(species=array(spp, ti.i32), mass=per_particle(lambda s: s.mass),
+                   inertia=per_particle(lambda s: s.inertia),
+                   d_eq=per_particle(lambda s: s.d_eq),
+                   radius=per_particle(lambda s: s.shape.radius),
+                   bounding_radius=per_particle(lambda s: s.shape.bounding_radius),
+                   species_np=spp)
+
+
+@dataclass
+class Materials:
+    """``pair`` (S, S, N_PAIR) and ``wall`` (S, N_PAIR): kn, ks, mu, c_e
+    (``layout.PAIR_*``); ``xi`` (S,) global damping; ``kappa`` (S,) permeability
+    inside a particle of the species."""
+    pair: object
+    wall: object
+    xi: object
+    kappa: object
+
+    @classmethod
+    def of(cls, model) -> "Materials":
+        sp = model.species
+        return cls(pair=array(pair_table(sp)), wall=array(wall_table(sp)),
+                   xi=array(np.array([s.xi for s in sp])),
+                   kappa=array(np.array([s.kappa for s in sp])))
+
+
+@dataclass
+class Templates:
+    """Every template's level-set grid in one flat array (``ls_meta[t]``: offset,
+    nx, ny; ``ls_geo[t]``: origin x, origin y, spacing) with its central-difference
+    gradient; surface nodes in body frame (``node_meta[t]``: offset, count) with
+    their outward boundary vectors ``node_area``; ``is_circle`` and ``radius`` for
+    the templates that are exact circles."""
+    ls_phi: object
+    ls_grad: object
+    ls_meta: object
+    ls_geo: object
+    node_pos: object
+    node_area: object
+    node_meta: object
+    is_circle: object
+    radius: object
+    node_count: np.ndarray
+
+    @classmethod
+    def of(cls, model) -> "Templates":
+        sp = model.species
+        spacings = [None if model.all_disks else s.ls_spacing for s in sp]
+        stk = shp.stack([s.shape for s in sp], spacings)
+        ls_phi = stk["ls_phi"] if stk["ls_phi"].size else np.zeros(1)
+        ls_grad = np.zeros((ls_phi.size, 2))
+        for off, (nx, ny), h in zip(stk["ls_offset"], stk["ls_shape"], stk["ls_spacing"]):
+            if nx:
+                ls_grad[off:off + nx * ny] = _grid_gradient(
+                    ls_phi[off:off + nx * ny].reshape(nx, ny), h)
+        return cls(ls_phi=array(ls_phi), ls_grad=array(ls_grad),
+                   ls_meta=array(np.column_stack([stk["ls_offset"], stk["ls_shape"]]), ti.i32),
+                   ls_geo=array(np.column_stack([stk["ls_origin"], stk["ls_spacing"]])),
+                   node_pos=array(stk["node_pos"]),
+                   node_area=array(np.concatenate([shp.boundary_vectors(s.shape.nodes)
+                                                   for s in sp])),
+                   node_meta=array(np.column_stack([stk["node_offset"], stk["node_count"]]),
+                                   ti.i32),
+                   is_circle=array(stk["is_circle"], ti.i32), radius=array(stk["radius"]),
+                   node_count=np.asarray(stk["node_count"]))
+
+
+@dataclass
+class WallGrid:
+    """The walls' level set (positive in the fluid), flat x-first, with its
+    gradient, its grid ``shape`` (nx, ny), ``origin`` and ``spacing``."""
+    phi: object
+    grad: object
+    shape: object
+    origin: tuple
+    spacing: float
+
+    @classmethod
+    def of(cls, model) -> "WallGrid":
+        wf = model.wall_field
+        return cls(phi=array(wf.phi.ravel()), grad=array(_grid_gradient(wf.phi, wf.spacing)),
+                   shape=array(np.array(wf.phi.shape), ti.i32),
+                   origin=(float(wf.origin[0]), float(wf.origin[1])),
+                   spacing=float(wf.spacing))
+
+
+class ShearHistory:
+    """Shear force of every contact, per body and surface node: ``slots`` partners
+    per node (``partner + 1`` in the int array, 0 for a free slot; the walls are
+    partner ``N``). Double-buffered: a step reads :attr:`old` and writes
+    :attr:`new`, then :meth:`swap`."""
+
+    def __init__(self, R: int, N: int, nodes: int, slots: int):
+        self.slots = slots
+        shape = (R, N, nodes, slots)
+        self.buffers = [(_zeros(shape, ti.i32), _zeros(shape, vector=True))
+                        for _ in range(2)]
+
+    @classmethod
+    def of(cls, model, templates: Templates, R: int, N: int) -> "ShearHistory":
+        if model.all_disks:
+            return cls(R, N, 1, DISK_HISTORY_SLOTS)
+        return cls(R, N, int(templates.node_count.max()), LS_HISTORY_SLOTS)
+
+    @property
+    def old(self):
+        return self.buffers[0]
+
+    @property
+    def new(self):
+        return self.buffers[1]
+
+    def swap(self):
+        self.buffers.reverse()
+
+    def clear(self):
+        for partners, _ in self.buffers:
+            partners.fill(0)
+
+
+def flags() -> object:
+    """The batch-wide ``layout.F_*`` counters, zeroed."""
+    return _zeros(layout.N_FLAGS, ti.i32)
