@@ -23,14 +23,14 @@ _LAZY = ("Result", "RunError", "Simulation")
 
 def __getattr__(name):
     # The simulator imports Taichi (about a second); the pressure-solver worker
-    # processes (:mod:`.solver_pool`) import this package and never need it.
+    # processes (:mod:`.fluid.worker`) import this package and never need it.
     if name in _LAZY:
         from . import simulation
         return getattr(simulation, name)
     raise AttributeError(f"module 'taichi_hsdem' has no attribute {name!r}")
 
 
-def run(scene, overrides=(), progress=None) -> "Result":
+def run(scene, overrides=(), progress=None):
     """Load (if needed) and run a scene; return its :class:`Result`.
 
     ``scene`` is a :class:`Scene`, a path to a TOML file or a dict.

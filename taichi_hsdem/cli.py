@@ -7,7 +7,6 @@ that did not balance), with what to change.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -100,19 +99,14 @@ def main(argv=None) -> int:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID
-    from . import backend
-    from .fluid import FluxImbalanceError
     from .output import VideoRecorder, write_resolved_scene, write_series, write_summary
-    from .simulation import RunError, Simulation
+    from .runner import UNSTABLE_HINT, RunFailed, build, execute
     out = Path(args.out) if args.out else Path(scene.output.dir)
     try:
-        sim = Simulation(scene)
-    except SceneError as exc:
-        for line in exc.problems:
+        sim = build(scene)
+    except RunFailed as exc:
+        for line in exc.lines:
             print(line, file=sys.stderr)
-        return EXIT_INVALID
-    except backend.BackendError as exc:
-        print(f"{args.scene}: run.arch: {exc}", file=sys.stderr)
         return EXIT_INVALID
     out.mkdir(parents=True, exist_ok=True)
     write_resolved_scene(sim.scene, out, sim.model.notes)
@@ -143,24 +137,15 @@ def main(argv=None) -> int:
             print(f"rendering skipped: {why}", file=sys.stderr)
     progress = _Progress(args.quiet, sim.scene.run.t_end)
     try:
-        result = sim.run(progress=progress, on_frame=recorder, frame_times=frame_times)
-    except FluxImbalanceError as exc:
+        result = execute(sim, progress=progress, on_frame=recorder, frame_times=frame_times)
+    except BaseException as exc:        # also Ctrl-C or a bug: leave no half-written video
         progress.close()
         if recorder is not None:
             recorder.close(keep=False)
-        print(f"run failed: the pressure solve did not conserve mass ({exc}); tighten "
-              f"fluid.solver_tol or refine fluid.cell_size", file=sys.stderr)
-        return EXIT_FAILED
-    except RunError as exc:
-        progress.close()
-        if recorder is not None:
-            recorder.close(keep=False)
-        print(f"run failed: {exc}", file=sys.stderr)
-        return EXIT_FAILED
-    except BaseException:               # Ctrl-C or a bug: leave no half-written video
-        progress.close()
-        if recorder is not None:
-            recorder.close(keep=False)
+        if isinstance(exc, RunFailed):
+            for line in exc.lines:
+                print(f"run failed: {line}", file=sys.stderr)
+            return EXIT_FAILED
         raise
     progress.close()
     if recorder is not None:
@@ -178,8 +163,7 @@ def main(argv=None) -> int:
         for k, r in bad:
             print(f"realization {k} (seed {r['seed']}) went unstable at t = {r['t_stop']:.4g} s: "
                   f"{r['reason']}", file=sys.stderr)
-        print("its results were not written; lower run.dt (or run.dt_safety), raise the "
-              "particles' kn, or lower the driving pressure / flow rate", file=sys.stderr)
+        print(f"its results were not written; {UNSTABLE_HINT}", file=sys.stderr)
         return EXIT_FAILED
     s = result.summary
     clogged = sum(1 for r in s["realizations"] if r["clogged"])

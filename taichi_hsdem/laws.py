@@ -117,3 +117,9 @@ def kozeny_carman(sphericity, diameter, area, gap):
             f"does not fit in a gap of {gap}; the gap must exceed (2/3) d = "
             f"{2.0 * diameter / 3.0:.6g}")
     return float(sphericity**2 * eps**3 * diameter**2 / (150.0 * (1.0 - eps) ** 2))
+
+
+def theory_escapees(phi, t, flow_rate, gap, diameter):
+    """Escapees of a steady stream, ``4 phi Q t / (H pi d^2)`` (MODEL.md sec. 4)."""
+    return 4.0 * np.asarray(phi, dtype=float) * flow_rate * np.asarray(t, dtype=float) / (
+        gap * math.pi * diameter ** 2)

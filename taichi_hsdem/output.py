@@ -17,36 +17,39 @@ import numpy as np
 from .scene import Scene, scene_to_toml
 
 
-def _atomic_write(path: Path, text: str):
+def atomic_write(path: Path, text: str):
+    """Write ``text`` to ``path`` through a temporary file beside it, so that
+    ``path`` never holds half a file."""
     tmp = path.with_name(path.name + ".part")
     tmp.write_text(text)
     os.replace(tmp, path)
 
 
-def _clean(obj):
-    """JSON-safe copy: numpy scalars to Python, non-finite floats to null."""
+def json_safe(obj):
+    """Plain JSON: numpy scalars to Python, NaN and inf to None (null), tuples to
+    lists, keys to strings, anything else to its text."""
     if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
+        return {str(k): json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, (np.integer,)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (bool, np.bool_)) or obj is None or isinstance(obj, str):
+        return bool(obj) if isinstance(obj, np.bool_) else obj
+    if isinstance(obj, (int, np.integer)):
         return int(obj)
-    if isinstance(obj, (np.floating, float)):
+    if isinstance(obj, (float, np.floating)):
         return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
+    return str(obj)
 
 
 def write_resolved_scene(scene: Scene, out: Path, notes: dict | None = None):
     """``scene.resolved.toml``, headed by what each ``auto`` chose and why."""
     out.mkdir(parents=True, exist_ok=True)
     head = "".join(f"# auto {key}: {why}\n" for key, why in sorted((notes or {}).items()))
-    _atomic_write(out / "scene.resolved.toml", head + scene_to_toml(scene))
+    atomic_write(out / "scene.resolved.toml", head + scene_to_toml(scene))
 
 
 def write_summary(summary: dict, out: Path):
-    _atomic_write(out / "summary.json", json.dumps(_clean(summary), indent=1) + "\n")
+    atomic_write(out / "summary.json", json.dumps(json_safe(summary), indent=1) + "\n")
 
 
 def write_series(series, statuses, out: Path):
@@ -57,7 +60,7 @@ def write_series(series, statuses, out: Path):
     for r, t, s in series:
         if statuses[r] == "ok":
             w.writerow([r, repr(float(t)), int(s)])
-    _atomic_write(out / "escapees.csv", buf.getvalue())
+    atomic_write(out / "escapees.csv", buf.getvalue())
 
 
 class VideoRecorder:

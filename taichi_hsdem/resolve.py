@@ -247,7 +247,7 @@ def resolve(scene: Scene, arch: str = "x64") -> Model:
             try:
                 kps.append(kozeny_carman(t.sphericity, t.equivalent_diameter, t.area, f.gap))
             except ValueError as exc:
-                bad(f"fluid.gap", f"{exc} (species '{sp.name}')")
+                bad("fluid.gap", f"{exc} (species '{sp.name}')")
                 kps.append(kappa_free)
         else:
             kps.append(0.0)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from taichi_hsdem import stats
-from taichi_hsdem.studies import figures, sweep
+from taichi_hsdem.studies import figures, points
 
 pytest.importorskip("matplotlib")
 
@@ -91,8 +91,8 @@ def test_pmf_bins_keep_censored_in_the_mean():
 
 
 def test_point_stats_handles_censored_and_unstable():
-    p = figures.Point("x", {"mu": 0.1}, scene=None)
-    run = figures.PointRun(p, rows=[
+    p = points.Point("x", {"mu": 0.1}, scene=None)
+    run = points.PointRun(p, rows=[
         {"seed": 0, "escapees": 3, "clogged": True, "status": "ok"},
         {"seed": 1, "escapees": 8, "clogged": False, "status": "ok"},
         {"seed": 2, "escapees": 1, "clogged": True, "status": "ok"},
@@ -114,9 +114,9 @@ def test_invalid_override_is_refused_before_running(tmp_path, capsys):
 
 
 def test_points_of_each_figure():
-    base, _ = figures.base_scene("shapes", quick=True)
-    pts = figures.build_points("shapes", base, figures._DEFAULT_POINTS["shapes"])
-    d_b = figures.bounding_diameter(base)
+    base, _ = points.base_scene("shapes", quick=True)
+    pts = points.build_points("shapes", base, points.DEFAULT_POINTS["shapes"])
+    d_b = points.bounding_diameter(base)
     assert d_b == pytest.approx(98.99e-6 * math.sqrt(2))
     circles = [p for p in pts if p.values["shape"] == "circle"]
     assert len(pts) == 4 and len(circles) == 2
@@ -126,8 +126,8 @@ def test_points_of_each_figure():
         assert sp.count == base.particles[0].count and sp.friction == 0.4
     for p in pts:
         assert p.scene.geometry.constriction_width == pytest.approx(p.values["W_over_db"] * d_b)
-    base, _ = figures.base_scene("polygons")
-    pts = figures.build_points("polygons", base, figures._DEFAULT_POINTS["polygons"])
+    base, _ = points.base_scene("polygons")
+    pts = points.build_points("polygons", base, points.DEFAULT_POINTS["polygons"])
     assert [p.values["n_vertices"] for p in pts] == [3, 4, 5, 6, 0]
     assert all(p.scene.particles[0].count == 50 for p in pts)
 
@@ -151,7 +151,7 @@ def _fake_run(values, label, rng, n=12, censor_at=None, info=None):
     info = info or {"n_particles": 12, "phi_actual": values.get("phi", 0.26), "d_eq": 140e-6,
                     "d_b": 140e-6, "flow_rate": 1e-10, "gap": 160e-6, "t_end": 2.0,
                     "dt": 1e-5, "contact_path": "disk"}
-    return figures.PointRun(figures.Point(label, values, scene=None), rows=rows,
+    return points.PointRun(points.Point(label, values, scene=None), rows=rows,
                             series=series, wall=1.0, info=info)
 
 
@@ -261,7 +261,7 @@ def test_escapees_time_quick(tmp_path, capsys, monkeypatch):
         figures.main(args + ["--realizations", "3"])
     with pytest.raises(Ran):
         figures.main(args + ["--realizations", "2", "--no-resume"])
-    monkeypatch.setattr(sweep, "code_digest", lambda: "0" * 64)
+    monkeypatch.setattr(points, "code_digest", lambda: "0" * 64)
     with pytest.raises(Ran):
         figures.main(args + ["--realizations", "2"])
 

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from taichi_hsdem import fluid
 from taichi_hsdem.fluid import pool as solver_pool
 from taichi_hsdem.fluid import (FluxImbalanceError, PressureSolver,
                                 circular_inclusion_error, circular_inclusion_pressure,

@@ -13,6 +13,7 @@ import pytest
 
 from taichi_hsdem import backend
 from taichi_hsdem import render
+from taichi_hsdem.geometry.polygon import triangulate
 from taichi_hsdem.geometry import shapes
 
 REPO = Path(__file__).resolve().parents[1]
@@ -313,7 +314,7 @@ def polygon_area(v):
 ])
 def test_ear_clipping_covers_the_polygon_exactly(outline):
     v = np.asarray(outline, dtype=float)
-    tri = render.triangulate(v)
+    tri = triangulate(v)
     a, b, c = v[tri[:, 0]], v[tri[:, 1]], v[tri[:, 2]]
     areas = 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
     assert np.all(areas > 0)
@@ -322,7 +323,7 @@ def test_ear_clipping_covers_the_polygon_exactly(outline):
 
 def test_ear_clipping_refuses_a_self_intersecting_outline():
     with pytest.raises(ValueError, match="not simple"):
-        render.triangulate([(0, 0), (1, 1), (1, 0), (0, 1), (0.5, 2), (-1, 0.5)])
+        triangulate([(0, 0), (1, 1), (1, 0), (0, 1), (0.5, 2), (-1, 0.5)])
 
 
 # ------------------------------------------------------------------ video

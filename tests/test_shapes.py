@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from taichi_hsdem.geometry import shapes as sh
+from taichi_hsdem.geometry.polygon import signed_area
 
 # L shape: [0,2]x[0,1] union [0,1]x[0,2], notch [1,2]x[1,2]. Given clockwise to
 # check that polygon() reorients it.
@@ -231,7 +232,7 @@ def test_regular_polygon_mass_properties(n):
     assert s.inertia_per_mass == pytest.approx(R * R * (1 + 2 * math.cos(math.pi / n) ** 2) / 6, rel=1e-13)
     assert s.bounding_radius == pytest.approx(R, rel=1e-14)
     np.testing.assert_array_equal(s.vertices[0], [R, 0.0])  # one vertex on +x
-    assert sh._signed_area(s.vertices) > 0  # counter-clockwise
+    assert signed_area(s.vertices) > 0  # counter-clockwise
 
 
 def test_concave_polygon_mass_properties_by_decomposition():

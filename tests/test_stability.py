@@ -3,7 +3,6 @@ reported as unstable (never written out as a result)."""
 import math
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from conftest import arena_scene, make_sim

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import taichi_hsdem.studies.sweep as sweep_module
-from taichi_hsdem.studies.sweep import (SweepError, calibrate, expand_grid, load_sweep,
-                                point_folder, run_sweep)
+from taichi_hsdem.studies.calibrate import calibrate
+from taichi_hsdem.studies.sweep import (SweepError, expand_grid, load_sweep, point_folder,
+                                        run_sweep)
 
 ROOT = Path(__file__).resolve().parents[1]
 HOURGLASS = ROOT / "scenes" / "hourglass24.toml"

@@ -1,5 +1,4 @@
 """The live viewer: key handling, and a real window when a display exists."""
-import os
 import shutil
 import subprocess
 import sys

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from taichi_hsdem.geometry import walls as wl
+from taichi_hsdem.geometry.polygon import signed_area
 
 # Outlines are built from a handful of sums, products and one tan(); 1e-12 on
 # numbers of order 10 leaves room for those few ulps and nothing else.
@@ -92,7 +93,7 @@ def test_from_polygon_finds_the_constriction_like_the_generators():
     g = wl.converging(4.0, 6.0, 1.0, 3.0, angle=30.0, constriction_length=0.5, width_out=3.0)
     # Given clockwise, with a repeated closing vertex: both are accepted.
     p = wl.from_polygon(np.vstack([g.outline[::-1], g.outline[-1:]]))
-    assert _signed_area(p.outline) > 0
+    assert signed_area(p.outline) > 0
     assert (p.constriction_x0, p.constriction_x1) == pytest.approx(
         (g.constriction_x0, g.constriction_x1), abs=EXACT)
     assert p.constriction_width == pytest.approx(1.0, abs=EXACT)
@@ -265,8 +266,3 @@ def test_fluid_area_against_trapezoids_and_rectangles():
     assert wl.fluid_area(ob, 0.0, 2.0) == pytest.approx(4.0 - 0.5, abs=EXACT)
     with pytest.raises(ValueError):
         wl.fluid_area(g, 2.0, 1.0)
-
-
-def _signed_area(poly):
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)

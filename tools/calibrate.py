@@ -10,7 +10,7 @@ Usage::
 Each round runs one batch of ``--realizations`` realizations at one value of
 ``--param`` (fresh seeds every round, so the rounds are independent samples); the
 rounds bracket the target and close in on it by regula falsi on ``log <s>``
-(:func:`taichi_hsdem.studies.sweep.calibrate`; ``<s>`` usually falls with friction, but
+(:func:`taichi_hsdem.studies.calibrate.calibrate`; ``<s>`` usually falls with friction, but
 either direction works). The result is the calibrated value and the range of the
 parameter over which the target lies inside the confidence interval of ``<s>``
 (censoring-aware, :mod:`taichi_hsdem.stats`).
@@ -102,10 +102,9 @@ def main(argv=None) -> int:
             print(f"tools/calibrate.py: {line}", file=sys.stderr)
         return EXIT_INVALID
     from taichi_hsdem import stats
-    from taichi_hsdem.fluid import FluxImbalanceError
+    from taichi_hsdem.runner import RunFailed
     from taichi_hsdem.scene import SceneError, load_scene
-    from taichi_hsdem.simulation import RunError
-    from taichi_hsdem.studies.sweep import CalibrationError, calibrate, simulation_evaluator
+    from taichi_hsdem.studies.calibrate import CalibrationError, calibrate, simulation_evaluator
 
     sets = list(args.set)
     realizations, rounds = args.realizations, args.rounds
@@ -156,13 +155,13 @@ def main(argv=None) -> int:
     try:
         cal = calibrate(evaluate_and_record, args.target, args.lo, args.hi, rounds=rounds,
                         xtol=args.xtol, confidence=args.confidence, log=say)
-    except (CalibrationError, RunError) as exc:
+    except CalibrationError as exc:
         print(f"calibration stopped: {exc}", file=sys.stderr)
         return EXIT_FAILED
-    except FluxImbalanceError as exc:
-        print(f"calibration stopped: the pressure solve did not conserve mass ({exc}); "
-              f"tighten fluid.solver_tol or refine fluid.cell_size", file=sys.stderr)
-        return EXIT_FAILED
+    except RunFailed as exc:
+        for line in exc.lines:
+            print(f"calibration stopped: {line}", file=sys.stderr)
+        return EXIT_INVALID if exc.kind == "invalid" else EXIT_FAILED
     report = {"scene": args.scene, "param": args.param, "set": sets,
               "realizations_per_round": realizations, **cal.to_dict()}
     (out / "calibration.json").write_text(json.dumps(report, indent=1) + "\n")

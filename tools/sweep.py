@@ -82,7 +82,7 @@ def main(argv=None) -> int:
         print(f"{r['folder']}: {r['status']}: {r['message']}", file=sys.stderr)
     counts = {s: sum(1 for r in rows if r["status"] == s)
               for s in ("ran", "skipped", "unstable", "failed", "invalid")}
-    say(f"done: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n)
+    say("done: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n)
         + f" -> {out / 'sweep.csv'}")
     if invalid:
         return EXIT_INVALID

@@ -526,7 +526,7 @@ class PressureSolver:
         """
         t_start = time.perf_counter()
         k3, single = self._as_batch(kappa, "kappa")
-        R, n = self.n_batch, self._n
+        R = self.n_batch
         k = k3.reshape(R, -1)[:, self._cells]
         bad = ~np.isfinite(k) | (k < 0)
         if bad.any():

@@ -42,7 +42,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import shapes as _shapes
-from .walls import Geometry, fluid_area, segments_intersect, wall_distance, wall_segments
+from .polygon import segments_intersect
+from .walls import Geometry, fluid_area, wall_distance, wall_segments
 
 # Candidate positions are drawn and wall-tested in vectorised batches; the batch
 # grows while draws keep failing (dense packing) and shrinks after quick successes,

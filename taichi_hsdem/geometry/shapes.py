@@ -28,6 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .polygon import (cross, crossings, point_segment_distance, segments_intersect,
+                      signed_area)
+
 __all__ = [
     "OUTSIDE_PHI",
     "Shape",
@@ -573,7 +576,8 @@ def overlaps(shape_a, xa, ta, shape_b, xb, tb, gap=0.0) -> bool:
     va = transform(shape_a.vertices, xa, ta)
     vb = transform(shape_b.vertices, xb, tb)
     ends_a, ends_b = np.roll(va, -1, axis=0), np.roll(vb, -1, axis=0)
-    if _proper_crossings(va[:, None], ends_a[:, None], vb[None], ends_b[None], tol).any():
+    if segments_intersect(va[:, None], ends_a[:, None], vb[None], ends_b[None], tol,
+                          touching=False).any():
         return True
     for s, v, x, other, vo, xo, to in (
         (shape_a, va, xa, shape_b, vb, xb, tb),
@@ -725,50 +729,12 @@ def _make_shape(*, name, kind, vertices, area, perimeter, inertia_per_mass, boun
     )
 
 
-def _cross(a, b):
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-def _point_segment_distance(p, a, b) -> np.ndarray:
-    """Distance from points ``p`` to segments ``a``-``b`` (all broadcast)."""
-    ab = b - a
-    ap = p - a
-    t = np.clip(np.sum(ap * ab, axis=-1) / np.sum(ab * ab, axis=-1), 0.0, 1.0)
-    d = ap - t[..., None] * ab
-    return np.hypot(d[..., 0], d[..., 1])
-
-
 def _polygon_sdf(vertices, points) -> np.ndarray:
     a = vertices
     b = np.roll(vertices, -1, axis=0)
-    q = points[:, None, :]
-    dist = _point_segment_distance(q, a, b).min(axis=1)
-    # Even-odd crossing count of a ray towards +x; the half-open test on y counts
-    # a ray through a vertex once. Horizontal edges never straddle, so their
-    # (unused) crossing abscissa is computed with a dummy slope.
-    ay, by = a[:, 1], b[:, 1]
-    straddle = (ay > q[..., 1]) != (by > q[..., 1])
-    dy = np.where(by == ay, 1.0, by - ay)
-    x_cross = a[:, 0] + (q[..., 1] - ay) * (b[:, 0] - a[:, 0]) / dy
-    inside = np.count_nonzero(straddle & (q[..., 0] < x_cross), axis=1) % 2 == 1
+    dist = point_segment_distance(points[:, None, :], a, b).min(axis=1)
+    inside = crossings(points, a, b) % 2 == 1
     return np.where(inside, -dist, dist)
-
-
-def _proper_crossings(p1, p2, q1, q2, tol) -> np.ndarray:
-    """Whether segments p1-p2 and q1-q2 cross at a point interior to both.
-
-    Each endpoint must lie farther than ``tol`` from the other segment's line,
-    on opposite sides, so touching and collinear segments do not count.
-    """
-
-    def sides(a, b, c, d):
-        ab = b - a
-        length = np.hypot(ab[..., 0], ab[..., 1])
-        sc = _cross(ab, c - a) / length
-        sd = _cross(ab, d - a) / length
-        return ((sc > tol) & (sd < -tol)) | ((sc < -tol) & (sd > tol))
-
-    return sides(q1, q2, p1, p2) & sides(p1, p2, q1, q2)
 
 
 def _piece_midpoints(v, others, tol) -> np.ndarray:
@@ -782,7 +748,7 @@ def _piece_midpoints(v, others, tol) -> np.ndarray:
     a = v[:, None]
     ab = np.roll(v, -1, axis=0)[:, None] - a
     t = np.sum((others[None] - a) * ab, axis=-1) / np.sum(ab * ab, axis=-1)
-    on_edge = _point_segment_distance(others[None], a, a + ab) <= tol
+    on_edge = point_segment_distance(others[None], a, a + ab) <= tol
     # Points off an edge are moved to its end, where they only add empty pieces.
     t = np.where(on_edge, np.clip(t, 0.0, 1.0), 1.0)
     ends = np.ones((len(v), 1))
@@ -820,23 +786,19 @@ def _check_outline(vertices) -> np.ndarray:
     ea, eb = np.triu_indices(nv, k=2)
     keep = ~((ea == 0) & (eb == nv - 1))
     ea, eb = ea[keep], eb[keep]
-    meet = _proper_crossings(a[ea], b[ea], a[eb], b[eb], tol)
+    meet = segments_intersect(a[ea], b[ea], a[eb], b[eb], tol, touching=False)
     for p, (s, e) in ((a[ea], (a[eb], b[eb])), (b[ea], (a[eb], b[eb])),
                       (a[eb], (a[ea], b[ea])), (b[eb], (a[ea], b[ea]))):
-        meet |= _point_segment_distance(p, s, e) <= tol
+        meet |= point_segment_distance(p, s, e) <= tol
     if meet.any():
         k = np.argmax(meet)
         raise ValueError(f"polygon edges {ea[k]} and {eb[k]} cross (the outline must be a simple polygon)")
     # Neighbouring edges need no test of their own: one folding back onto the
     # other puts a vertex on a non-neighbouring edge (caught above) or, for a
     # triangle, leaves no area.
-    if abs(_signed_area(v)) <= 1e-12 * float(np.ptp(v, axis=0).max()) ** 2:
+    if abs(signed_area(v)) <= 1e-12 * float(np.ptp(v, axis=0).max()) ** 2:
         raise ValueError("polygon has zero area (its vertices are collinear)")
     return v
-
-
-def _signed_area(v) -> float:
-    return 0.5 * float(np.sum(_cross(v, np.roll(v, -1, axis=0))))
 
 
 def _polygon_shape(vertices, n_nodes, name, centred=False) -> Shape:
@@ -846,16 +808,16 @@ def _polygon_shape(vertices, n_nodes, name, centred=False) -> Shape:
     n = _node_count(n_nodes)
     if n < len(v):
         raise ValueError(f"n_nodes={n} is fewer than the polygon's {len(v)} vertices")
-    if _signed_area(v) < 0:
+    if signed_area(v) < 0:
         v = v[::-1]
     w = np.roll(v, -1, axis=0)
-    c = _cross(v, w)
+    c = cross(v, w)
     area = 0.5 * c.sum()
     if not centred:
         centroid = ((v + w) * c[:, None]).sum(axis=0) / (6.0 * area)
         v = v - centroid
         w = w - centroid
-        c = _cross(v, w)
+        c = cross(v, w)
     # Polar moment of area of the triangle fan from the (now centroidal) origin.
     polar = np.sum(c * (np.sum(v * v, axis=1) + np.sum(v * w, axis=1) + np.sum(w * w, axis=1))) / 12.0
     nodes, lengths, normals = _polygon_nodes(v, n)

@@ -34,9 +34,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-# Points per chunk times segments: bounds the temporaries of the vectorised
-# point-segment distances (about 16 MB of float64 per array at 2**21).
-_CHUNK_ELEMENTS = 2 ** 21
+from .polygon import (CHUNK_ELEMENTS, clipped_area, cross, crossings, points_in_polygon,
+                      segments_intersect, signed_area)
+
 # Relative tolerance of "same width" / "same x" against the geometry's size:
 # outlines are built from sums and products of the user's numbers, exact to a
 # few ulps, never to 1e-9.
@@ -457,8 +457,8 @@ def fluid_area(geometry: Geometry, x0: float, x1: float) -> float:
     """
     x0, x1 = float(x0), float(x1)
     _require(x0 <= x1, f"fluid_area: x0 = {x0:g} must be <= x1 = {x1:g}")
-    area = _clipped_area(geometry.outline, x0, x1)
-    return area - sum(_clipped_area(o, x0, x1) for o in geometry.obstacles)
+    area = clipped_area(geometry.outline, x0, x1)
+    return area - sum(clipped_area(o, x0, x1) for o in geometry.obstacles)
 
 
 def width_at(geometry: Geometry, x):
@@ -488,40 +488,6 @@ def width_at(geometry: Geometry, x):
     return float(out) if out.ndim == 0 else out
 
 
-def segments_intersect(p1, p2, q1, q2, tol: float = 0.0) -> np.ndarray:
-    """Whether closed segments ``[p1, p2]`` and ``[q1, q2]`` cross or touch (broadcast).
-
-    Parameters
-    ----------
-    p1, p2, q1, q2 : (..., 2) array_like
-        Segment end points; broadcast against each other.
-    tol : float
-        Distance within which an end point counts as lying on the other segment.
-
-    Returns
-    -------
-    ndarray of bool
-
-    Examples
-    --------
-    >>> segments_intersect([0, 0], [2, 2], [[0, 2], [3, 0]], [[2, 0], [3, 2]]).tolist()
-    [True, False]
-    """
-    p1, p2, q1, q2 = (np.asarray(v, dtype=float) for v in (p1, p2, q1, q2))
-    ep, eq = p2 - p1, q2 - q1
-    # Orientation of each end point against the other segment's line, turned into
-    # a signed distance so that `tol` is a length.
-    lp = np.maximum(np.hypot(ep[..., 0], ep[..., 1]), 1e-300)
-    lq = np.maximum(np.hypot(eq[..., 0], eq[..., 1]), 1e-300)
-    d1, d2 = _cross(eq, p1 - q1) / lq, _cross(eq, p2 - q1) / lq
-    d3, d4 = _cross(ep, q1 - p1) / lp, _cross(ep, q2 - p1) / lp
-    proper = (((d1 > tol) & (d2 < -tol)) | ((d1 < -tol) & (d2 > tol))) & \
-             (((d3 > tol) & (d4 < -tol)) | ((d3 < -tol) & (d4 > tol)))
-    touch = (_on_segment(p1, q1, q2, d1, tol) | _on_segment(p2, q1, q2, d2, tol)
-             | _on_segment(q1, p1, p2, d3, tol) | _on_segment(q2, p1, p2, d4, tol))
-    return proper | touch
-
-
 # ----------------------------------------------------------------------------
 # Internals
 # ----------------------------------------------------------------------------
@@ -529,22 +495,6 @@ def segments_intersect(p1, p2, q1, q2, tol: float = 0.0) -> np.ndarray:
 def _require(condition: bool, message: str) -> None:
     if not condition:
         raise ValueError(message)
-
-
-def _cross(a, b):
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-def _on_segment(p, a, b, d, tol):
-    """p within tol of the line through a, b (d: its signed distance) and inside the box."""
-    lo, hi = np.minimum(a, b) - tol, np.maximum(a, b) + tol
-    inside = np.all((p >= lo) & (p <= hi), axis=-1)
-    return (np.abs(d) <= tol) & inside
-
-
-def _signed_area(poly: np.ndarray) -> float:
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
 def _clean_polygon(points, what: str) -> np.ndarray:
@@ -564,7 +514,7 @@ def _clean_polygon(points, what: str) -> np.ndarray:
     while len(poly) >= 3:
         e_in = poly - np.roll(poly, 1, axis=0)
         e_out = np.roll(poly, -1, axis=0) - poly
-        lin = np.abs(_cross(e_in, e_out)) <= _REL_TOL * np.linalg.norm(e_in, axis=1) \
+        lin = np.abs(cross(e_in, e_out)) <= _REL_TOL * np.linalg.norm(e_in, axis=1) \
             * np.linalg.norm(e_out, axis=1)
         back = lin & (np.sum(e_in * e_out, axis=1) < 0)
         if back.any():
@@ -575,7 +525,7 @@ def _clean_polygon(points, what: str) -> np.ndarray:
             break
         poly = np.delete(poly, int(np.flatnonzero(lin)[0]), axis=0)
     _require(len(poly) >= 3, f"{what}: needs at least 3 distinct, non-collinear vertices")
-    area = _signed_area(poly)
+    area = signed_area(poly)
     _require(abs(area) > _REL_TOL * scale ** 2, f"{what}: the polygon has no area")
     if area < 0:
         poly = poly[::-1].copy()
@@ -601,31 +551,10 @@ def _check_simple(poly: np.ndarray, what: str, tol: float) -> None:
                          f"cross or touch; the polygon must be simple (no self-intersections)")
 
 
-def _points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Even-odd crossing test (points exactly on an edge: either answer)."""
-    a, b = _edges(poly)
-    return _crossings(points, a, b) % 2 == 1
-
-
-def _crossings(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Number of edges a->b crossed by the ray from each point towards +x."""
-    count = np.zeros(len(points), dtype=np.int64)
-    step = max(1, _CHUNK_ELEMENTS // max(len(a), 1))
-    dy = b[:, 1] - a[:, 1]
-    safe_dy = np.where(dy == 0, 1.0, dy)  # horizontal edges never straddle a height
-    for s in range(0, len(points), step):
-        px = points[s:s + step, 0:1]
-        py = points[s:s + step, 1:2]
-        straddle = (a[:, 1] > py) != (b[:, 1] > py)
-        x_cross = a[:, 0] + (py - a[:, 1]) * (b[:, 0] - a[:, 0]) / safe_dy
-        count[s:s + step] = np.count_nonzero(straddle & (px < x_cross), axis=1)
-    return count
-
-
 def _distance_to_pieces(points, start, unit, length) -> np.ndarray:
     """Distance from each point to the nearest of the segments/rays start + [0, length] * unit."""
     out = np.empty(len(points))
-    step = max(1, _CHUNK_ELEMENTS // max(len(start), 1))
+    step = max(1, CHUNK_ELEMENTS // max(len(start), 1))
     for s in range(0, len(points), step):
         d = points[s:s + step, None, :] - start[None, :, :]
         t = np.clip(np.einsum("mpk,pk->mp", d, unit), 0.0, length)
@@ -686,26 +615,8 @@ def _in_fluid(geometry: Geometry, pts: np.ndarray) -> np.ndarray:
     mid = (x > geometry.x_min) & (x < geometry.x_max)
     # Even-odd over outline and obstacle edges together: inside the outline and
     # outside every (disjoint, strictly interior) obstacle.
-    res[mid] = _crossings(pts[mid], w.edge_a, w.edge_b) % 2 == 1
+    res[mid] = crossings(pts[mid], w.edge_a, w.edge_b) % 2 == 1
     return res
-
-
-def _clip_half_plane(poly: np.ndarray, xc: float, keep_right: bool) -> np.ndarray:
-    s = poly[:, 0] - xc if keep_right else xc - poly[:, 0]
-    out = []
-    n = len(poly)
-    for k in range(n):
-        q = (k + 1) % n
-        if s[k] >= 0:
-            out.append(poly[k])
-        if (s[k] >= 0) != (s[q] >= 0):
-            out.append(poly[k] + s[k] / (s[k] - s[q]) * (poly[q] - poly[k]))
-    return np.array(out).reshape(-1, 2)
-
-
-def _clipped_area(poly: np.ndarray, x0: float, x1: float) -> float:
-    clipped = _clip_half_plane(_clip_half_plane(poly, x0, True), x1, False)
-    return _signed_area(clipped) if len(clipped) >= 3 else 0.0
 
 
 def _section(geometry: Geometry, x: float, side: int) -> float:
@@ -738,7 +649,7 @@ def _check_obstacles(outline: np.ndarray, obstacles: tuple, tol: float) -> None:
     oa, ob = _edges(outline)
     for k, obs in enumerate(obstacles):
         ka, kb = _edges(obs)
-        inside = _points_in_polygon(obs, outline)
+        inside = points_in_polygon(obs, outline)
         touch = segments_intersect(ka[:, None], kb[:, None], oa[None], ob[None], tol).any()
         _require(bool(inside.all()) and not touch,
                  f"obstacle {k}: must lie strictly inside the outline (not crossing or "
@@ -747,7 +658,7 @@ def _check_obstacles(outline: np.ndarray, obstacles: tuple, tol: float) -> None:
             other = obstacles[m]
             ma, mb = _edges(other)
             meet = segments_intersect(ka[:, None], kb[:, None], ma[None], mb[None], tol).any()
-            nested = _points_in_polygon(obs[:1], other)[0] or _points_in_polygon(other[:1], obs)[0]
+            nested = points_in_polygon(obs[:1], other)[0] or points_in_polygon(other[:1], obs)[0]
             _require(not (meet or nested), f"obstacles {m} and {k} overlap or touch")
 
 

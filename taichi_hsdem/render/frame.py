@@ -53,6 +53,7 @@ import taichi as ti
 from taichi.lang import impl
 
 from .. import backend
+from ..geometry.polygon import signed_area, triangle_areas, triangulate
 
 __all__ = ["vulkan_status", "colormap", "triangulate", "Renderer", "VideoWriter",
            "close_window"]
@@ -268,76 +269,6 @@ def _ensure_taichi():
 # ---------------------------------------------------------------------------
 # Geometry helpers (host, once per renderer)
 
-def _signed_area(v):
-    x, y = v[:, 0], v[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
-
-
-def triangulate(vertices) -> np.ndarray:
-    """Ear-clipping triangulation of a simple polygon (convex or concave).
-
-    Parameters
-    ----------
-    vertices : array_like, shape (n, 2)
-        Outline, either orientation, no repeated closing vertex.
-
-    Returns
-    -------
-    ndarray of int, shape (n - 2 - (collinear vertices), 3)
-        Counter-clockwise triangles as indices into ``vertices``.
-
-    Raises
-    ------
-    ValueError
-        If the outline crosses itself (no ear left, or the triangles overlap).
-
-    Examples
-    --------
-    >>> triangulate([[0, 0], [2, 0], [2, 2], [1, 1], [0, 2]]).shape
-    (3, 3)
-    """
-    v = np.asarray(vertices, dtype=np.float64)
-    if v.ndim != 2 or v.shape[1] != 2 or len(v) < 3:
-        raise ValueError(f"a polygon needs (n >= 3, 2) vertices, got shape {v.shape}")
-    ring = list(range(len(v))) if _signed_area(v) > 0 else list(range(len(v)))[::-1]
-    eps = 1e-12 * float(np.ptp(v, axis=0).max()) ** 2
-
-    def cross(a, b, c):
-        return (v[b, 0] - v[a, 0]) * (v[c, 1] - v[a, 1]) - (v[b, 1] - v[a, 1]) * (v[c, 0] - v[a, 0])
-
-    triangles = []
-    while len(ring) > 3:
-        m = len(ring)
-        for k in range(m):
-            a, b, c = ring[k - 1], ring[k], ring[(k + 1) % m]
-            turn = cross(a, b, c)
-            if abs(turn) <= eps:          # collinear: drop b, no triangle lost
-                del ring[k]
-                break
-            if turn < 0:                  # reflex vertex
-                continue
-            corners = {tuple(v[a]), tuple(v[b]), tuple(v[c])}
-            blocked = any(
-                tuple(v[p]) not in corners
-                and cross(a, b, p) >= -eps and cross(b, c, p) >= -eps and cross(c, a, p) >= -eps
-                for p in ring)
-            if not blocked:
-                triangles.append((a, b, c))
-                del ring[k]
-                break
-        else:
-            raise ValueError("polygon is not simple: ear clipping found no ear")
-    if abs(cross(*ring)) > eps:
-        triangles.append(tuple(ring))
-    triangles = np.array(triangles, dtype=np.int64).reshape(-1, 3)
-    # Crossing edges can still yield ears; the pieces then overlap or turn
-    # clockwise, and their areas no longer add up to the outline's.
-    areas = _triangle_areas(v, triangles)
-    if np.any(areas <= 0.0) or abs(areas.sum() - abs(_signed_area(v))) > 1e-9 * areas.sum():
-        raise ValueError("polygon is not simple: its triangles overlap (edges cross)")
-    return triangles
-
-
 def _template_outline(shape):
     if shape.kind == "circle":
         a = 2.0 * np.pi * np.arange(_CIRCLE_SEGMENTS) / _CIRCLE_SEGMENTS
@@ -358,12 +289,6 @@ def _inset(outline, width):
     return outline + width * miter
 
 
-def _triangle_areas(points, triangles):
-    a, b, c = (points[triangles[:, k]] for k in range(3))
-    ab, ac = b - a, c - a
-    return 0.5 * (ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
-
-
 def _template_block(shape, outline_width):
     """Body-frame triangle vertices and their roles for one template.
 
@@ -374,12 +299,12 @@ def _template_block(shape, outline_width):
     rim the width is halved until the inset triangles keep their orientation.
     """
     outline = _template_outline(shape)
-    if _signed_area(outline) < 0:
+    if signed_area(outline) < 0:
         outline = outline[::-1]
     triangles = triangulate(outline)
     width = outline_width
     inner = _inset(outline, width)
-    while np.any(_triangle_areas(inner, triangles) <= 0.0) and width > 1e-3 * outline_width:
+    while np.any(triangle_areas(inner, triangles) <= 0.0) and width > 1e-3 * outline_width:
         width *= 0.5
         inner = _inset(outline, width)
     parts = [outline[triangles].reshape(-1, 2), inner[triangles].reshape(-1, 2)]

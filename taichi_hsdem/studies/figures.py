@@ -87,265 +87,34 @@ from __future__ import annotations
 
 import argparse
 import csv
-import hashlib
 import json
 import math
-import re
 import sys
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .. import stats
-from ..scene import Scene, SceneError, load_scene
+from ..laws import theory_escapees
+from ..output import atomic_write, json_safe
+from .digest import code_digest
+from .points import (DEFAULT_POINTS, DEFAULT_REALIZATIONS, FIGURES, PAPER_REALIZATIONS,
+                     QUICK_POINTS, SPEC, FigureError, PointRun, base_scene, build_points,
+                     load_point, point_file, point_key, run_point, save_point, series_by_seed)
+from .plots import pyplot, render
+from ..scene import SceneError
 
-FIGURES = ("escapees-time", "pmf-collapse", "friction", "shapes", "polygons")
-DEFAULT_REALIZATIONS = 10
-PAPER_REALIZATIONS = 100
-QUICK_BOX = 6.0                 # quick mode: upstream channel QUICK_BOX x QUICK_BOX d_b
-QUICK_CLOG_WINDOW = 0.15        # s
-QUICK_CELLS_PER_DB = 5.0        # quick mode, level-set scenes: fluid cell d_b / 5
 PMF_BIN_FRACTION = 0.5          # target PMF bin width in units of <s> (rounded to whole s)
-
-_REPO = Path(__file__).resolve().parents[1]
-
-# Per command: base scene, overrides of the command, quick realizations and t_end.
-_SPEC = {
-    "escapees-time": dict(scene="vani_phi026.toml", fixed=["run.stop_at_clog=false"],
-                          quick_realizations=2, quick_t_end=0.5, level_set=False),
-    "pmf-collapse": dict(scene="vani_phi026.toml", fixed=["run.stop_at_clog=true"],
-                         quick_realizations=3, quick_t_end=0.5, level_set=False),
-    "friction": dict(scene="vani_phi026.toml", fixed=["run.stop_at_clog=true"],
-                     quick_realizations=3, quick_t_end=0.5, level_set=False),
-    "shapes": dict(scene="squares.toml", fixed=["run.stop_at_clog=true", "particles.friction=0.4"],
-                   quick_realizations=2, quick_t_end=0.3, level_set=True),
-    "polygons": dict(scene="polygons.toml",
-                     fixed=["run.stop_at_clog=true", "particles.friction=0.4"],
-                     quick_realizations=2, quick_t_end=0.3, level_set=True),
-}
-_DEFAULT_POINTS = {
-    "escapees-time": dict(phi=(0.086, 0.17, 0.26)),
-    "pmf-collapse": dict(phi=(0.19, 0.26, 0.32)),
-    "friction": dict(mu=(0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9), phi=0.26),
-    "shapes": dict(ratios=(1.7, 1.2)),
-    "polygons": dict(vertices=(3, 4, 5, 6), ratio=1.2),
-}
-_QUICK_POINTS = {
-    "friction": dict(mu=(0.1, 0.5, 0.9)),
-    "polygons": dict(vertices=(3, 4, 6)),
-}
-
-
-class FigureError(Exception):
-    """Invalid arguments or scenes: every problem, one line each."""
-
-    def __init__(self, problems):
-        self.problems = [problems] if isinstance(problems, str) else list(problems)
-        super().__init__("\n".join(self.problems))
 
 
 # ----------------------------------------------------------------------------- points
 
-@dataclass
-class Point:
-    """One scene of a figure: ``values`` name it (CSV columns), ``label`` prints it."""
-    label: str
-    values: dict
-    scene: Scene
-    overrides: dict = field(default_factory=dict)   # what the point sets on the base scene
-
-
-@dataclass
-class PointRun:
-    point: Point
-    rows: list = field(default_factory=list)        # one dict per realization
-    series: list = field(default_factory=list)      # (seed, t, escapees), stable ones only
-    wall: float = 0.0
-    info: dict = field(default_factory=dict)
-    error: str | None = None
-    resumed: bool = False                           # read back from <out>/points/
-
-    @property
-    def ok_rows(self):
-        return [r for r in self.rows if r["status"] == "ok"]
-
-    def samples(self):
-        ok = self.ok_rows
-        return (np.array([r["escapees"] for r in ok], dtype=np.int64),
-                np.array([bool(r["clogged"]) for r in ok], dtype=bool))
-
-
-def bounding_diameter(scene: Scene, species: int = 0) -> float:
-    """Bounding (circumscribed) diameter ``d_b`` of a species' shape."""
-    from ..resolve import species_shape
-    return 2.0 * species_shape(scene.particles[species]).bounding_radius
-
-
-def quick_overrides(scene: Scene, level_set: bool) -> list[str]:
-    """What ``--quick`` sets on a base scene (see the module notes)."""
-    d_b = bounding_diameter(scene)
-    g = scene.geometry
-    out = [f"clog.window={QUICK_CLOG_WINDOW}"]
-    if g.kind == "converging" and scene.feed.region is None:
-        box = QUICK_BOX * d_b
-        if box < g.width_in:
-            ratio = box * min(box, g.length_in) / (g.width_in * g.length_in)
-            out += [f"geometry.width_in={box!r}", f"geometry.length_in={min(box, g.length_in)!r}"]
-            for k, sp in enumerate(scene.particles):
-                if sp.count is not None:
-                    out.append(f"particles.{k}.count={max(2, int(round(sp.count * ratio)))}")
-    if level_set:
-        out.append(f"fluid.cell_size={d_b / QUICK_CELLS_PER_DB!r}")
-    return out
-
-
-def _default_scene_path(name: str) -> Path:
-    for root in (_REPO, Path.cwd()):
-        p = root / "scenes" / name
-        if p.exists():
-            return p
-    return _REPO / "scenes" / name
-
-
-def base_scene(command: str, scene_path=None, quick=False, user_sets=(), t_end=None) -> tuple[Scene, list[str]]:
-    """The command's base scene and the overrides that made it (in order)."""
-    spec = _SPEC[command]
-    path = Path(scene_path) if scene_path else _default_scene_path(spec["scene"])
-    raw = load_scene(path)
-    overrides = list(spec["fixed"])
-    if quick:
-        overrides += quick_overrides(raw, spec["level_set"])
-        overrides.append(f"run.t_end={spec['quick_t_end']}")
-    overrides += list(user_sets)
-    return load_scene(path, overrides), overrides
-
-
-def _with(base: Scene, values: dict) -> Scene:
-    return base.with_values(values)
-
-
-def build_points(command: str, base: Scene, opts: dict) -> list[Point]:
-    """The scenes of one figure, every one validated (``SceneError`` otherwise)."""
-    pts = []
-    if command in ("escapees-time", "pmf-collapse"):
-        for phi in opts["phi"]:
-            ov = {"particles.packing_fraction": float(phi), "particles.count": None}
-            pts.append(Point(f"phi={phi:g}", {"phi": float(phi)}, _with(base, ov), ov))
-    elif command == "friction":
-        phi = float(opts["phi"])
-        for mu in opts["mu"]:
-            ov = {"particles.packing_fraction": phi, "particles.count": None,
-                  "particles.friction": float(mu)}
-            pts.append(Point(f"mu={mu:g}", {"mu": float(mu), "phi": phi}, _with(base, ov), ov))
-    elif command == "shapes":
-        d_b = bounding_diameter(base)
-        base_name = base.particles[0].shape
-        circle = {"particles.shape": "circle", "particles.diameter": d_b}
-        for key in ("side", "width", "height", "n_vertices", "vertices"):
-            circle[f"particles.{key}"] = None
-        for ratio in opts["ratios"]:
-            w = {"geometry.constriction_width": float(ratio) * d_b}
-            for shape, extra in ((base_name, {}), ("circle", circle)):
-                ov = {**extra, **w}
-                pts.append(Point(f"{shape} W/d_b={ratio:g}",
-                                 {"shape": shape, "W_over_db": float(ratio), "d_b": d_b},
-                                 _with(base, ov), ov))
-    elif command == "polygons":
-        d_b = bounding_diameter(base)
-        w = {"geometry.constriction_width": float(opts["ratio"]) * d_b}
-        clear = {f"particles.{k}": None for k in ("side", "width", "height", "vertices")}
-        for nv in opts["vertices"]:
-            ov = {**clear, "particles.shape": "regular_polygon", "particles.n_vertices": int(nv),
-                  "particles.diameter": d_b, **w}
-            pts.append(Point(f"{nv} vertices", {"shape": "regular_polygon", "n_vertices": int(nv),
-                                                "W_over_db": float(opts["ratio"]), "d_b": d_b},
-                             _with(base, ov), ov))
-        if opts.get("circle", True):
-            ov = {**clear, "particles.shape": "circle", "particles.n_vertices": None,
-                  "particles.diameter": d_b, **w}
-            pts.append(Point("circle", {"shape": "circle", "n_vertices": 0,
-                                        "W_over_db": float(opts["ratio"]), "d_b": d_b},
-                             _with(base, ov), ov))
-    else:  # pragma: no cover - argparse limits the choice
-        raise ValueError(command)
-    return pts
-
 
 # ----------------------------------------------------------------------------- running
 
-def _point_info(sim) -> dict:
-    from ..geometry.walls import fluid_area
-    m = sim.model
-    sc = sim.scene
-    region = m.feed_region
-    area = fluid_area(m.geometry, region[0], region[1])
-    solid = sum(s.count * s.shape.area for s in m.species)
-    return {"n_particles": int(m.n_particles), "d_eq": float(m.species[0].d_eq),
-            "d_b": 2.0 * float(m.species[0].shape.bounding_radius),
-            "phi_actual": float(solid / area) if area > 0 else math.nan,
-            "flow_rate": sc.fluid.flow_rate if sc.fluid.bc == "flow_rate" else None,
-            "gap": float(sc.fluid.gap), "dt": float(sim.dt), "t_end": float(sc.run.t_end),
-            "contact_path": "disk" if m.all_disks else "level-set"}
-
-
-def run_point(point: Point, realizations: int, batch: int | None = None, log=None) -> PointRun:
-    """Run ``realizations`` of a point in batches of ``batch`` (default: all at once).
-
-    Realization ``k`` has seed ``run.seed + k`` whatever the batching.
-    """
-    from ..fluid import FluxImbalanceError
-    from ..simulation import RunError, Simulation
-    out = PointRun(point)
-    batch = realizations if not batch else max(1, min(int(batch), realizations))
-    seed0 = point.scene.run.seed
-    t0 = time.perf_counter()
-    done = 0
-    while done < realizations:
-        n = min(batch, realizations - done)
-        scene = point.scene.with_values({"run.realizations": n, "run.seed": seed0 + done})
-        try:
-            sim = Simulation(scene)
-            if not out.info:
-                out.info = _point_info(sim)
-            res = sim.run()
-        except (RunError, FluxImbalanceError) as exc:
-            out.error = f"{type(exc).__name__}: {exc}"
-            break
-        seen = set()
-        for r, t, s in res.series:
-            key = (r, float(t))
-            if key in seen:
-                continue
-            seen.add(key)
-            if res.summary["realizations"][r]["status"] == "ok":
-                out.series.append((res.summary["realizations"][r]["seed"], float(t), int(s)))
-        for rr in res.summary["realizations"]:
-            out.rows.append({k: rr.get(k) for k in ("seed", "escapees", "clogged", "t_clog",
-                                                    "t_stop", "status", "reason")})
-        del sim, res
-        done += n
-        if log is not None and done < realizations:
-            log(f"  {point.label}: {done}/{realizations} realizations, "
-                f"{time.perf_counter() - t0:.0f} s")
-    out.wall = time.perf_counter() - t0
-    return out
-
 
 # ----------------------------------------------------------------------------- analysis
-
-def theory_escapees(phi, t, flow_rate, gap, diameter):
-    """Escapees of a steady stream, ``4 phi Q t / (H pi d^2)`` (MODEL.md sec. 4)."""
-    return 4.0 * np.asarray(phi, dtype=float) * flow_rate * np.asarray(t, dtype=float) / (
-        gap * math.pi * diameter ** 2)
-
-
-def _by_seed(series):
-    out = {}
-    for seed, t, s in series:
-        out.setdefault(seed, []).append((t, s))
-    return {k: sorted(v) for k, v in out.items()}
 
 
 def stream_rate(series, rows) -> dict:
@@ -361,7 +130,7 @@ def stream_rate(series, rows) -> dict:
     counted in ``n_no_escape``.
     """
     ok = {r["seed"]: r for r in rows if r["status"] == "ok"}
-    per = _by_seed([x for x in series if x[0] in ok])
+    per = series_by_seed([x for x in series if x[0] in ok])
     events, duration, firsts, no_escape = 0, 0.0, [], 0
     for seed, row in ok.items():
         pts = per.get(seed, [])
@@ -440,7 +209,6 @@ def point_stats(run: PointRun) -> dict:
     n_unstable = sum(1 for r in run.rows if r["status"] != "ok")
     s, c = run.samples()
     d = {"realizations": len(run.rows), "n_ok": int(s.size), "n_unstable": n_unstable}
-    nan2 = (math.nan, math.nan)
     if s.size == 0:
         d.update(n_clogged=0, n_censored=0, mean_s=math.nan, mean_s_lo=math.nan,
                  mean_s_hi=math.nan, mean_method="", observed_mean_s=math.nan,
@@ -478,21 +246,6 @@ def _fmt(v):
         return repr(float(v)) if math.isfinite(v) else ("nan" if math.isnan(v) else
                                                         ("inf" if v > 0 else "-inf"))
     return str(v)
-
-
-def _jsonable(obj):
-    """Plain JSON: numpy to Python, NaN and inf to None, anything else to str."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (bool, np.bool_)) or obj is None or isinstance(obj, str):
-        return bool(obj) if isinstance(obj, np.bool_) else obj
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    return str(obj)
 
 
 def write_csv(path: Path, rows: list[dict], columns=None):
@@ -537,226 +290,6 @@ def _kept(run: PointRun) -> str:
     return " (finished earlier, read back)" if run.resumed else ""
 
 
-# ----------------------------------------------------------------------------- plots
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _err_mean(rows):
-    """Means and asymmetric error bars with infinite ends drawn as arrows."""
-    y = np.array([r["mean_s"] for r in rows], dtype=float)
-    lo = np.array([r["mean_s_lo"] for r in rows], dtype=float)
-    hi = np.array([r["mean_s_hi"] for r in rows], dtype=float)
-    obs = np.array([r["observed_mean_s"] for r in rows], dtype=float)
-    unbounded = ~np.isfinite(y)
-    # no clog at all: plot the observed mean, a lower bound
-    y = np.where(unbounded, obs, y)
-    finite_hi = hi[np.isfinite(hi)]
-    cap = (np.nanmax(np.concatenate([finite_hi, y[np.isfinite(y)]])) * 1.5
-           if np.isfinite(y).any() else 1.0)
-    hi_open = ~np.isfinite(hi)
-    hi = np.where(hi_open, np.maximum(cap, y), hi)
-    lo = np.where(np.isfinite(lo), lo, y)
-    return y, np.vstack([np.clip(y - lo, 0, None), np.clip(hi - y, 0, None)]), hi_open
-
-
-def _pmf_panel(ax, groups, title="PMF of s/<s>"):
-    """``groups``: [(label, bins)]; semilog, exp(-x) for reference."""
-    xmax = 1.0
-    for label, bins in groups:
-        b = [x for x in bins if x["count"] > 0]
-        if not b:
-            continue
-        x = np.array([v["x"] for v in b])
-        xmax = max(xmax, float(x.max()))
-        ax.errorbar(x, [v["pmf"] for v in b], yerr=[v["stderr"] for v in b], fmt="o",
-                    ms=4, capsize=2, label=label)
-    xs = np.linspace(0, max(xmax, 3.0), 100)
-    ax.plot(xs, np.exp(-xs), "k--", lw=1, label="exp(-x)")
-    ax.set_yscale("log")
-    ax.set_xlabel("x = s / <s>")
-    ax.set_ylabel("PMF (density in x)")
-    ax.set_title(title)
-    ax.legend(fontsize=7)
-
-
-def _finish(plt, fig, path, meta):
-    """Footer line ``meta``, layout, write ``path``, free the figure."""
-    fig.text(0.01, 0.005, meta, fontsize=6, color="0.4", ha="left", va="bottom")
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def plot_escapees_time(runs, rows, path: Path, meta: str):
-    plt = _plt()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.4))
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    t_max = 0.0
-    for k, (run, row) in enumerate(zip(runs, rows)):
-        if run.error or not run.series:
-            continue
-        col = colors[k % len(colors)]
-        per = _by_seed(run.series)
-        for seed, pts in per.items():
-            t, s = zip(*pts)
-            a1.step(t, s, where="post", color=col, alpha=0.25, lw=0.8)
-            t_max = max(t_max, max(t))
-        # mean over realizations on the common sample times (a realization that
-        # stopped keeps its last count)
-        times = np.array(sorted({t for pts in per.values() for t, _ in pts}))
-        means = np.zeros(times.size)
-        for pts in per.values():
-            t, s = (np.array(v, dtype=float) for v in zip(*pts))
-            i = np.searchsorted(t, times + 1e-12, side="right") - 1
-            means += np.where(i >= 0, s[np.clip(i, 0, None)], 0.0)
-        means /= len(per)
-        a1.plot(times, means, color=col, lw=2, label=f"phi = {run.point.values['phi']:g} (mean)")
-        tt = np.linspace(0, max(times), 50)
-        th = theory_escapees(run.point.values["phi"], tt, row["flow_rate"], row["gap"], row["d_eq"])
-        a1.plot(tt, th, "--", color=col, lw=1)
-        t1 = row["t_first_mean"]
-        if math.isfinite(t1):
-            ts = np.linspace(t1, max(times), 20)
-            a1.plot(ts, theory_escapees(run.point.values["phi"], ts - t1, row["flow_rate"],
-                                        row["gap"], row["d_eq"]), ":", color=col, lw=1)
-    a1.set_xlabel("t (s)")
-    a1.set_ylabel("escapees s")
-    a1.set_title("escapees over time; -- 4 phi Q t/(H pi d^2), : same from first escape")
-    a1.title.set_fontsize(8)
-    a1.legend(fontsize=7)
-    phis = np.array([r["phi"] for r in rows])
-    ok = [i for i, r in enumerate(rows) if math.isfinite(r["rate"])]
-    if ok:
-        a2.errorbar(phis[ok], [rows[i]["rate"] for i in ok],
-                    yerr=[rows[i]["rate_stderr"] for i in ok], fmt="o", capsize=3,
-                    label="fitted (from first escape)")
-    pp = np.linspace(0, max(phis.max(), 0.01) * 1.1, 50)
-    r0 = rows[0]
-    a2.plot(pp, theory_escapees(pp, 1.0, r0["flow_rate"], r0["gap"], r0["d_eq"]), "k--",
-            label="4 phi Q / (H pi d^2)")
-    a2.set_xlabel("packing fraction phi")
-    a2.set_ylabel("escape rate (1/s)")
-    a2.set_title("steady escape rate")
-    a2.legend(fontsize=7)
-    _finish(plt, fig, path, meta)
-
-
-def plot_pmf_collapse(runs, rows, pmfs, path: Path, meta: str):
-    plt = _plt()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.4))
-    for run, row in zip(runs, rows):
-        s, c = run.samples()
-        if s.size == 0:
-            continue
-        counts, edges = stats.histogram(s, c)
-        lab = (f"phi = {run.point.values['phi']:g} ({row['n_clogged']} clogged, "
-               f"{row['n_censored']} censored)")
-        if counts.size and counts.sum():
-            a1.stairs(counts, edges, label=lab, lw=1.5)
-        else:
-            a1.plot([], [], label=lab)
-    a1.set_xlabel("escapees before clogging s")
-    a1.set_ylabel("realizations")
-    a1.set_title("histogram of s (clogged realizations)")
-    a1.legend(fontsize=7)
-    _pmf_panel(a2, [(f"phi = {r.point.values['phi']:g}", pmfs[i]) for i, r in enumerate(runs)])
-    _finish(plt, fig, path, meta)
-
-
-def _mean_decay_panels(a1, a2, x, rows, xlabel, labels=None, xticks=None, series_label=None):
-    y, yerr, open_hi = _err_mean(rows)
-    a1.errorbar(x, y, yerr=yerr, fmt="o-", capsize=3, label=series_label)
-    if open_hi.any():
-        a1.plot(np.asarray(x)[open_hi], yerr[1][open_hi] + y[open_hi], "^", color="0.3", ms=5,
-                label="interval open above" if not a1.get_legend_handles_labels()[1].count(
-                    "interval open above") else None)
-    if np.all(y[np.isfinite(y)] > 0) and np.isfinite(y).any():
-        a1.set_yscale("log")
-    a1.set_xlabel(xlabel)
-    a1.set_ylabel("<s> (escapees before clogging)")
-    lam = np.array([r["decay_rate"] for r in rows], dtype=float)
-    lo = np.array([r["decay_rate_lo"] for r in rows], dtype=float)
-    hi = np.array([r["decay_rate_hi"] for r in rows], dtype=float)
-    fin = np.isfinite(lam) & np.isfinite(hi)
-    if fin.any():
-        xa = np.asarray(x, dtype=float)[fin]
-        a2.errorbar(xa, lam[fin], yerr=[np.clip(lam[fin] - lo[fin], 0, None),
-                                        np.clip(hi[fin] - lam[fin], 0, None)],
-                    fmt="s-", capsize=3, label=series_label)
-    a2.set_xlabel(xlabel)
-    a2.set_ylabel("decay rate lambda of P(s) ~ exp(-lambda s)")
-    for a in (a1, a2):
-        if xticks is not None:
-            a.set_xticks(xticks)
-            a.set_xticklabels(labels)
-
-
-def plot_friction(runs, rows, path: Path, meta: str):
-    plt = _plt()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.4))
-    _mean_decay_panels(a1, a2, [r["mu"] for r in rows], rows, "friction mu")
-    a1.set_title(f"<s> vs friction at phi = {rows[0]['phi']:g} (95 % CI)")
-    a2.set_title("decay rates (95 % CI)")
-    _finish(plt, fig, path, meta)
-
-
-def plot_shapes(runs, rows, pmfs, path: Path, meta: str):
-    plt = _plt()
-    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(14, 4.4))
-    shapes_ = list(dict.fromkeys(r["shape"] for r in rows))
-    for j, shape in enumerate(shapes_):
-        sel = [i for i, r in enumerate(rows) if r["shape"] == shape]
-        dodge = 0.01 * (j - 0.5 * (len(shapes_) - 1))      # keep equal points apart
-        _mean_decay_panels(a1, a2, [rows[i]["W_over_db"] + dodge for i in sel],
-                           [rows[i] for i in sel], "W / d_b", series_label=shape)
-    ratios = sorted({r["W_over_db"] for r in rows})
-    for a in (a1, a2):
-        a.set_xticks(ratios)
-        a.set_xlim(min(ratios) - 0.15, max(ratios) + 0.15)
-    a1.set_title("<s> (95 % CI)")
-    a2.set_title("decay rates (95 % CI)")
-    a1.legend(fontsize=7)
-    a2.legend(fontsize=7)
-    _pmf_panel(a3, [(r.point.label, pmfs[i]) for i, r in enumerate(runs)])
-    _finish(plt, fig, path, meta)
-
-
-def plot_polygons(runs, rows, pmfs, path: Path, meta: str):
-    plt = _plt()
-    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(14, 4.4))
-    nv = [r["n_vertices"] for r in rows]
-    poly = [v for v in nv if v > 0]
-    circ_x = (max(poly) + 1.5) if poly else 1.0
-    x = [v if v > 0 else circ_x for v in nv]
-    labels = [str(v) if v > 0 else "circle" for v in nv]
-    _mean_decay_panels(a1, a2, x, rows, "vertices", labels=labels, xticks=x)
-    a1.set_title(f"<s> vs vertex count, W/d_b = {rows[0]['W_over_db']:g} (95 % CI)")
-    a2.set_title("decay rates (95 % CI)")
-    _pmf_panel(a3, [(r.point.label, pmfs[i]) for i, r in enumerate(runs)])
-    _finish(plt, fig, path, meta)
-
-
-def render(command: str, runs, rows, pmfs, path: Path, meta: str = ""):
-    """Draw one figure from its point runs, ``points.csv`` rows and PMF bins."""
-    if command == "escapees-time":
-        plot_escapees_time(runs, rows, path, meta)
-    elif command == "pmf-collapse":
-        plot_pmf_collapse(runs, rows, pmfs, path, meta)
-    elif command == "friction":
-        plot_friction(runs, rows, path, meta)
-    elif command == "shapes":
-        plot_shapes(runs, rows, pmfs, path, meta)
-    elif command == "polygons":
-        plot_polygons(runs, rows, pmfs, path, meta)
-    else:
-        raise ValueError(f"unknown figure {command!r}")
-
-
 # ----------------------------------------------------------------------------- driver
 
 def _point_row(command: str, run: PointRun) -> dict:
@@ -785,51 +318,6 @@ def _point_row(command: str, run: PointRun) -> dict:
     return row
 
 
-def _point_key(point: Point, realizations: int) -> str:
-    """What makes a finished point reusable: its scene (TOML text, seeds included),
-    the realization count and the package code (:func:`taichi_hsdem.sweep.code_digest`).
-    The batch size is left out: a realization does not depend on those beside it."""
-    from ..scene import scene_to_toml
-    from .sweep import code_digest
-    text = (scene_to_toml(point.scene) + f"\n# realizations {int(realizations)}"
-            f"\n# code {code_digest()}")
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def point_file(out: Path, point: Point) -> Path:
-    """Where a finished point is kept: ``<out>/points/<label>.json``."""
-    return Path(out) / "points" / (re.sub(r"[^A-Za-z0-9._=+-]+", "_", point.label) + ".json")
-
-
-def _save_point(path: Path, key: str, run: PointRun) -> None:
-    data = {"key": key, "label": run.point.label, "wall_s": run.wall, "info": run.info,
-            "rows": run.rows, "series": [list(x) for x in run.series]}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    tmp.write_text(json.dumps(_jsonable(data)) + "\n")
-    tmp.replace(path)
-
-
-_ROW_KEYS = ("seed", "escapees", "clogged", "t_clog", "t_stop", "status", "reason")
-
-
-def _load_point(path: Path, key: str, point: Point) -> PointRun | None:
-    """The finished run of ``point`` kept at ``path``, or None (absent, unreadable,
-    malformed, or of another scene, realization count or code)."""
-    try:
-        data = json.loads(path.read_text())
-        if not isinstance(data, dict) or data.get("key") != key:
-            return None
-        rows = data["rows"]
-        if not all(isinstance(r, dict) and all(k in r for k in _ROW_KEYS) for r in rows):
-            return None
-        return PointRun(point, rows=list(rows),
-                        series=[(int(a), float(b), int(c)) for a, b, c in data["series"]],
-                        wall=float(data["wall_s"]), info=dict(data["info"]), resumed=True)
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        return None
-
-
 def _opts_from_args(command, args) -> dict:
     opts = {}
     for key in ("phi", "mu", "ratios", "vertices", "ratio"):
@@ -852,23 +340,23 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
 
     Raises :class:`FigureError` for invalid scenes or arguments before anything runs.
     """
-    if command not in _SPEC:
+    if command not in SPEC:
         raise FigureError(f"unknown figure {command!r}; choose from {', '.join(FIGURES)}")
     try:
-        _plt()
+        pyplot()
     except ImportError:
         raise FigureError("matplotlib is needed for the figures: pip install 'taichi_hsdem[plot]'") \
             from None
     if realizations is None:
-        realizations = _SPEC[command]["quick_realizations"] if quick else DEFAULT_REALIZATIONS
+        realizations = SPEC[command]["quick_realizations"] if quick else DEFAULT_REALIZATIONS
     if int(realizations) < 1:
         raise FigureError(f"--realizations must be >= 1, got {realizations}")
     sets = list(sets)
     if seed is not None:
         sets.append(f"run.seed={int(seed)}")
-    merged = dict(_DEFAULT_POINTS[command])
+    merged = dict(DEFAULT_POINTS[command])
     if quick:
-        merged.update(_QUICK_POINTS.get(command, {}))
+        merged.update(QUICK_POINTS.get(command, {}))
     merged.update(opts or {})
     opts = merged
     try:
@@ -891,7 +379,6 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
                               f"{path.name}: give distinct values")
         owner[path.name] = p.label
     out.mkdir(parents=True, exist_ok=True)
-    from .sweep import code_digest
     code_digest()                  # this process's code, before any point runs
     say = log or (lambda msg: None)
     say(f"{command}: {len(points)} point(s) x {realizations} realization(s), t_end = "
@@ -899,8 +386,8 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
     t0 = time.perf_counter()
     runs, rows = [], []
     for k, (p, path) in enumerate(zip(points, kept_files)):
-        key = _point_key(p, realizations)
-        kept = _load_point(path, key, p) if resume else None
+        key = point_key(p, realizations)
+        kept = load_point(path, key, p) if resume else None
         if kept is not None:
             say(f"[{k + 1}/{len(points)}] {p.label}: finished earlier, read from {path}")
             run = kept
@@ -908,7 +395,7 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
             say(f"[{k + 1}/{len(points)}] {p.label} ...")
             run = run_point(p, int(realizations), batch, log=say)
             if not run.error:
-                _save_point(path, key, run)
+                save_point(path, key, run)
         row = _point_row(command, run)
         runs.append(run)
         rows.append(row)
@@ -962,9 +449,8 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
                         "overrides": {k: v for k, v in r.point.overrides.items()},
                         "wall_s": r.wall, "error": r.error, "info": r.info,
                         "resumed": r.resumed} for r in runs]}
-    tmp = out / "figure.json.part"
-    tmp.write_text(json.dumps(_jsonable(info), indent=1, allow_nan=False) + "\n")
-    tmp.replace(out / "figure.json")
+    atomic_write(out / "figure.json", json.dumps(json_safe(info), indent=1, allow_nan=False)
+                 + "\n")
     files.append(out / "figure.json")
     print(f"wrote {out}/: " + ", ".join(f.name for f in files) + f" ({wall:.1f} s)", flush=True)
     return {"out": out, "files": files, "points": rows, "runs": runs}

@@ -1,0 +1,110 @@
+"""TOML in and out: reading a file with one clear error per way it can fail, the
+values of ``--set key=value``, and writing a scene back as TOML that reads back to
+an equal scene."""
+from __future__ import annotations
+
+import math
+import numbers
+import re
+from pathlib import Path
+from typing import Any, Mapping
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+from .keys import SceneError
+
+def toml_string(text: str) -> str:
+    """A TOML basic string, control characters escaped."""
+    escapes = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n",
+               "\f": "\\f", "\r": "\\r"}
+    out = []
+    for ch in text:
+        if ch in escapes:
+            out.append(escapes[ch])
+        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
+            out.append(f"\\u{ord(ch):04X}")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
+def toml_value(value: Any) -> str:
+    """``value`` spelled as TOML (numbers exactly, by ``repr``)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):
+        value = float(value)
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        return toml_string(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        return "{" + ", ".join(f"{toml_key(k)} = {toml_value(v)}"
+                               for k, v in value.items()) + "}"
+    return str(value)
+
+
+def toml_key(key: str) -> str:
+    """A bare key when TOML allows one, else a quoted one."""
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else toml_string(key)
+
+
+def parse_override_value(text: str) -> Any:
+    """A TOML value, or the text itself when it is not one (``flow_rate``)."""
+    try:
+        parsed = tomllib.loads(f"v = {text}")
+    except tomllib.TOMLDecodeError:
+        return text
+    return parsed["v"] if list(parsed) == ["v"] else text
+
+
+def read_toml(path: Path, what: str = "scene", error: type = None) -> dict:
+    """A TOML file as a dict; every way it can fail becomes ``error`` (default
+    :class:`SceneError`) with one line naming the file (``what`` it should be)."""
+    error = error or SceneError
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise error(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise error(f"{path}: is a folder, not a {what} file") from None
+    except OSError as exc:
+        raise error(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: invalid TOML: {exc}") from None
+
+
+def scene_to_toml(scene) -> str:
+    """The scene as TOML text that `load_scene` reads back to an equal scene."""
+    lines = ["# Scene written by taichi_hsdem: every key, defaults filled in."]
+    data = scene.to_dict()
+    tables = []
+    for key, value in data.items():
+        if isinstance(value, Mapping):
+            tables.append((f"[{toml_key(key)}]", value))
+        elif isinstance(value, list) and value and all(isinstance(v, Mapping)
+                                                       for v in value):
+            tables += [(f"[[{toml_key(key)}]]", v) for v in value]
+        else:
+            lines.append(f"{toml_key(key)} = {toml_value(value)}")
+    for header, table in tables:
+        lines += ["", header]
+        lines += [f"{toml_key(k)} = {toml_value(v)}" for k, v in table.items()
+                  if v is not None]
+    return "\n".join(lines) + "\n"
