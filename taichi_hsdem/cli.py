@@ -99,7 +99,7 @@ def main(argv=None) -> int:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID
-    from .output import VideoRecorder, write_resolved_scene, write_series, write_summary
+    from .output import write_resolved_scene, write_series, write_summary
     from .runner import UNSTABLE_HINT, RunFailed, build, execute
     out = Path(args.out) if args.out else Path(scene.output.dir)
     try:
@@ -125,7 +125,7 @@ def main(argv=None) -> int:
         else:
             print(f"--view skipped: {why}", file=sys.stderr)
     if sim.scene.output.video or viewer is not None:
-        from .render.frame import vulkan_status
+        from .render import VideoRecorder, vulkan_status
         ok, why = vulkan_status()
         if ok:
             recorder = VideoRecorder(sim, out / "video.mp4" if sim.scene.output.video else None,

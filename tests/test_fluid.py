@@ -5,8 +5,8 @@ import pytest
 
 from taichi_hsdem.fluid import pool as solver_pool
 from taichi_hsdem.fluid import (FluxImbalanceError, PressureSolver,
-                                circular_inclusion_error, circular_inclusion_pressure,
-                                free_permeability, kozeny_carman)
+                                circular_inclusion_error, circular_inclusion_pressure)
+from taichi_hsdem.laws import free_permeability, kozeny_carman
 
 
 def disks(shape, centres, radius, low, high=1.0):

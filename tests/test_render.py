@@ -14,6 +14,7 @@ import pytest
 from taichi_hsdem import backend
 from taichi_hsdem import render
 from taichi_hsdem.geometry.polygon import triangulate
+from taichi_hsdem.render.font import text_mask
 from taichi_hsdem.geometry import shapes
 
 REPO = Path(__file__).resolve().parents[1]
@@ -287,7 +288,7 @@ def test_strip_prints_time_escapees_and_colour_bar(renderer, frame):
 
     strip = frame[renderer.domain_height:]
     scale = 1                                          # width 400 -> font scale 1
-    text = render._text_mask("test   t = 1.250 s   escapees 12", scale)
+    text = text_mask("test   t = 1.250 s   escapees 12", scale)
     top = (strip.shape[0] - 7 * scale) // 2
     region = strip[top:top + text.shape[0], 4 * scale:4 * scale + text.shape[1]]
     lit = np.all(region == np.array(render.TEXT_COLOR, dtype=np.uint8), axis=2)

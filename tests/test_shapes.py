@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from taichi_hsdem.geometry import levelset as ls
 from taichi_hsdem.geometry import shapes as sh
 from taichi_hsdem.geometry.polygon import signed_area
 
@@ -75,7 +76,7 @@ def test_concave_sdf_in_notch_and_arms(rng):
 def test_level_set_grid_covers_bounding_box_with_margin():
     s = sh.rectangle(1.0, 0.55)
     h = 0.1
-    g = sh.make_level_set(s, h, margin_cells=3)
+    g = ls.make_level_set(s, h, margin_cells=3)
     nx, ny = g.phi.shape
     far = g.origin + h * (np.array([nx, ny]) - 1)
     # Margin of at least 3 cells past each side of the box (to round-off).
@@ -94,11 +95,11 @@ def test_bilinear_sample_error_is_second_order_for_circle(rng):
     s = sh.circle(2 * r)
     errors = []
     for h in (0.05, 0.025):
-        g = sh.make_level_set(s, h)
+        g = ls.make_level_set(s, h)
         rho = rng.uniform(r / 2, r + 2 * h, size=2000)
         ang = rng.uniform(0, 2 * np.pi, size=2000)
         p = np.column_stack([rho * np.cos(ang), rho * np.sin(ang)])
-        phi, grad = sh.sample(g, p)
+        phi, grad = ls.sample(g, p)
         # Bilinear error <= h^2/8 (max|f_xx| + max|f_yy|) over the cell; for
         # |p| - r both second derivatives are <= 1/rho, rho >= r/2 - sqrt(2) h.
         rho_min = r / 2 - math.sqrt(2) * h
@@ -119,32 +120,32 @@ def test_bilinear_sample_is_exact_where_sdf_is_linear(rng):
     # and bilinear interpolation reproduces linear functions exactly.
     s = sh.square(1.0)
     h = 0.02
-    g = sh.make_level_set(s, h)
+    g = ls.make_level_set(s, h)
     p = rng.uniform(-0.55, 0.55, size=(4000, 2))
     a = np.abs(p)
     away = (np.abs(a[:, 0] - a[:, 1]) > 3 * h) & (np.minimum(a[:, 0], a[:, 1]) < 0.5 - 3 * h)
     p = p[away]
-    phi, grad = sh.sample(g, p)
+    phi, grad = ls.sample(g, p)
     np.testing.assert_allclose(phi, box_sdf(p, 0.5), atol=1e-12)
     axis = np.where((a[away, 0] > a[away, 1])[:, None], [1.0, 0.0], [0.0, 1.0]) * np.sign(p)
     np.testing.assert_allclose(grad, axis, atol=1e-9)
 
 
 def test_sample_gradient_is_derivative_of_interpolant_and_outside_is_far(rng):
-    g = sh.make_level_set(sh.polygon(L_OUTLINE), 0.1)
+    g = ls.make_level_set(sh.polygon(L_OUTLINE), 0.1)
     p = rng.uniform(-1.0, 1.0, size=(50, 2))
     eps = 1e-7
-    phi, grad = sh.sample(g, p)
+    phi, grad = ls.sample(g, p)
     # Central differences of the interpolant (linear in each direction within a
     # cell, so only round-off and cell-boundary crossings, which are rare at eps)
     fd = np.column_stack([
-        (sh.sample(g, p + [eps, 0])[0] - sh.sample(g, p - [eps, 0])[0]) / (2 * eps),
-        (sh.sample(g, p + [0, eps])[0] - sh.sample(g, p - [0, eps])[0]) / (2 * eps),
+        (ls.sample(g, p + [eps, 0])[0] - ls.sample(g, p - [eps, 0])[0]) / (2 * eps),
+        (ls.sample(g, p + [0, eps])[0] - ls.sample(g, p - [0, eps])[0]) / (2 * eps),
     ])
     np.testing.assert_allclose(grad, fd, atol=1e-6)
     out = np.array([[10.0, 0.0], [0.0, -10.0], [np.nan, 0.0]])
-    phi, grad = sh.sample(g, out)
-    assert np.all(phi == sh.OUTSIDE_PHI) and np.all(grad == 0.0)
+    phi, grad = ls.sample(g, out)
+    assert np.all(phi == ls.OUTSIDE_PHI) and np.all(grad == 0.0)
 
 
 # ------------------------------------------------------------------------- nodes
@@ -351,8 +352,8 @@ def test_overlaps_respects_concave_notch():
 def test_stack_layout_matches_per_template_sampling(rng):
     shapes = [sh.square(1.0, n_nodes=8), sh.circle(1.0, n_nodes=12), sh.polygon(L_OUTLINE, n_nodes=10)]
     spacings = [0.1, None, 0.2]
-    d = sh.stack(shapes, spacings)
-    grids = [sh.make_level_set(shapes[0], 0.1), sh.make_level_set(shapes[2], 0.2)]
+    d = ls.stack(shapes, spacings)
+    grids = [ls.make_level_set(shapes[0], 0.1), ls.make_level_set(shapes[2], 0.2)]
     sizes = [g.phi.size for g in grids]
     assert d["ls_offset"].tolist() == [0, sizes[0], sizes[0]]
     assert d["ls_shape"].tolist() == [list(grids[0].phi.shape), [0, 0], list(grids[1].phi.shape)]
@@ -374,14 +375,14 @@ def test_stack_layout_matches_per_template_sampling(rng):
         f = lambda a, b: d["ls_phi"][d["ls_offset"][k] + a * ny + b]  # noqa: E731
         flat = (f(i, j) * (1 - tx) * (1 - ty) + f(i + 1, j) * tx * (1 - ty)
                 + f(i, j + 1) * (1 - tx) * ty + f(i + 1, j + 1) * tx * ty)
-        np.testing.assert_allclose(flat, sh.sample(g, p)[0], atol=1e-14)
+        np.testing.assert_allclose(flat, ls.sample(g, p)[0], atol=1e-14)
 
 
 def test_stack_needs_spacing_for_polygons():
     with pytest.raises(ValueError, match="template 1 .square. is a polygon and needs a level-set spacing"):
-        sh.stack([sh.circle(1.0), sh.square(1.0)], [None, None])
+        ls.stack([sh.circle(1.0), sh.square(1.0)], [None, None])
     with pytest.raises(ValueError, match="2 shapes but 1 spacings"):
-        sh.stack([sh.circle(1.0), sh.square(1.0)], [None])
+        ls.stack([sh.circle(1.0), sh.square(1.0)], [None])
 
 
 # ------------------------------------------------------------------------ errors
@@ -402,7 +403,7 @@ def test_stack_needs_spacing_for_polygons():
     # folds back: vertex 2 lands on edge 0, so edge 2 touches it
     (lambda: sh.polygon([[0, 0], [2, 0], [1, 0], [1, 1]]), "polygon edges 0 and 2 cross"),
     (lambda: sh.regular_polygon(6, 1.0, n_nodes=5), "n_nodes=5 is fewer than the polygon's 6 vertices"),
-    (lambda: sh.make_level_set(sh.square(1.0), 0.0), "spacing must be a finite number > 0"),
+    (lambda: ls.make_level_set(sh.square(1.0), 0.0), "spacing must be a finite number > 0"),
     (lambda: sh.overlaps(SQ, [0, 0], 0, SQ, [2, 0], 0, gap=-1), "gap must be >= 0"),
 ])
 def test_errors_are_clear(make, message):

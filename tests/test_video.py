@@ -268,7 +268,7 @@ def test_frame_zero_is_the_initial_state_and_the_range_is_fixed(tmp_path):
     frame, and frames land at output.frames times from 0 to t_end."""
     needs_vulkan()
     from taichi_hsdem import Simulation
-    from taichi_hsdem.output import VideoRecorder
+    from taichi_hsdem.render import VideoRecorder
 
     sim = Simulation(load_scene(str(HOURGLASS), ["run.t_end=0.5", "output.frames=4",
                                                  "output.width=480"]))
@@ -315,7 +315,7 @@ def test_the_video_ends_at_the_first_frame_after_the_realization_stopped(tmp_pat
     the final state."""
     needs_vulkan()
     from taichi_hsdem import Simulation
-    from taichi_hsdem.output import VideoRecorder
+    from taichi_hsdem.render import VideoRecorder
 
     sim = Simulation(load_scene(str(HOURGLASS), [
         "run.t_end=20", "clog.window=0.5", "geometry.neck_width=0.8",

@@ -115,7 +115,7 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
 
     rec = tmp = None
     if video_frames:                 # draw and encode frames too (into a scratch folder)
-        from taichi_hsdem.output import VideoRecorder
+        from taichi_hsdem.render import VideoRecorder
         tmp = tempfile.TemporaryDirectory(prefix="hsdem-bench-")
         rec = VideoRecorder(sim, Path(tmp.name) / "video.mp4")
     t0 = time.perf_counter()

@@ -23,6 +23,7 @@ import numpy as np
 
 from .. import backend
 from ..backend import ti
+from ..geometry import levelset
 from ..geometry import shapes as shp
 from ..resolve import pair_table, wall_table
 from . import layout
@@ -168,7 +169,7 @@ class Templates:
     def of(cls, model) -> "Templates":
         sp = model.species
         spacings = [None if model.all_disks else s.ls_spacing for s in sp]
-        stk = shp.stack([s.shape for s in sp], spacings)
+        stk = levelset.stack([s.shape for s in sp], spacings)
         ls_phi = stk["ls_phi"] if stk["ls_phi"].size else np.zeros(1)
         ls_grad = np.zeros((ls_phi.size, 2))
         for off, (nx, ny), h in zip(stk["ls_offset"], stk["ls_shape"], stk["ls_spacing"]):

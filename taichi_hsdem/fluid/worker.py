@@ -2,4 +2,5 @@
 the solves :class:`taichi_hsdem.fluid.pool.Pool` sends it on stdin (see :mod:`.pool`)."""
 from .pool import serve
 
-serve()
+if __name__ == "__main__":
+    serve()

@@ -8,9 +8,8 @@ what the rest of the method needs (MODEL.md section 1):
   particle's mass and inertia come from its shape instead of being assumed;
 * surface nodes spaced evenly along the outline, each with the length of boundary
   it stands for and its outward normal (contact and fluid forces act there);
-* the exact signed distance (negative inside) and its sampled version, a level-set
-  grid read by bilinear interpolation, as the contact kernels do;
-* ``stack``, which lays all templates out in flat arrays for upload to Taichi.
+* the exact signed distance (negative inside), which :mod:`.levelset` samples on
+  the grids the contact kernels read.
 
 Everything here is plain numpy and runs on the host: once per template, and
 for `overlaps`, once per candidate pair when particles are placed. The kernels
@@ -32,26 +31,18 @@ from .polygon import (cross, crossings, point_segment_distance, segments_interse
                       signed_area)
 
 __all__ = [
-    "OUTSIDE_PHI",
     "Shape",
-    "LevelSetGrid",
     "circle",
     "square",
     "rectangle",
     "regular_polygon",
     "polygon",
     "signed_distance",
-    "make_level_set",
-    "sample",
     "transform",
     "to_body",
     "overlaps",
-    "stack",
 ]
 
-#: Level-set value returned for points outside a grid: far enough that no
-#: contact test (``phi < 0``) can fire, finite so it survives float32 upload.
-OUTSIDE_PHI = 1.0e30
 
 # Round-off allowance of `overlaps`, relative to the bounding radii: outlines
 # this close count as touching, not overlapping, so that shapes placed edge to
@@ -122,26 +113,6 @@ class Shape:
     node_normals: np.ndarray
 
 
-@dataclass(frozen=True, eq=False)
-class LevelSetGrid:
-    """Signed distance of one template sampled on a regular grid (body frame).
-
-    Attributes
-    ----------
-    origin : ndarray of shape (2,)
-        Body-frame coordinates of grid node ``(0, 0)``.
-    spacing : float
-        Distance between neighbouring grid nodes, the same along x and y.
-    phi : ndarray of shape (nx, ny)
-        ``phi[i, j]`` is the signed distance at ``origin + (i, j) * spacing``
-        (x-first indexing).
-    """
-
-    origin: np.ndarray
-    spacing: float
-    phi: np.ndarray
-
-
 # ---------------------------------------------------------------------------
 # Constructors
 # ---------------------------------------------------------------------------
@@ -169,7 +140,7 @@ def circle(diameter, n_nodes=40) -> Shape:
     >>> float(s.inertia_per_mass)
     0.5
     """
-    r = 0.5 * _positive("diameter", diameter)
+    r = 0.5 * check_positive("diameter", diameter)
     n = _node_count(n_nodes)
     angle = 2.0 * np.pi * np.arange(n) / n
     normals = np.column_stack([np.cos(angle), np.sin(angle)])
@@ -213,7 +184,7 @@ def square(side, n_nodes=40) -> Shape:
     >>> float(s.area), float(s.perimeter), float(s.node_lengths[0])
     (1.0, 4.0, 0.5)
     """
-    side = _positive("side", side)
+    side = check_positive("side", side)
     return _polygon_shape(_box(side, side), n_nodes, "square", centred=True)
 
 
@@ -237,8 +208,8 @@ def rectangle(width, height, n_nodes=40) -> Shape:
     >>> round(float(s.inertia_per_mass), 12)  # (w^2 + h^2) / 12
     0.416666666667
     """
-    width = _positive("width", width)
-    height = _positive("height", height)
+    width = check_positive("width", width)
+    height = check_positive("height", height)
     return _polygon_shape(_box(width, height), n_nodes, "rectangle", centred=True)
 
 
@@ -270,7 +241,7 @@ def regular_polygon(n_vertices, diameter, n_nodes=40) -> Shape:
         raise ValueError(f"n_vertices must be an integer, got {n_vertices!r}") from None
     if nv < 3:
         raise ValueError(f"a regular polygon needs n_vertices >= 3, got {nv}")
-    r = 0.5 * _positive("diameter", diameter)
+    r = 0.5 * check_positive("diameter", diameter)
     angle = 2.0 * np.pi * np.arange(nv) / nv
     vertices = r * np.column_stack([np.cos(angle), np.sin(angle)])
     return _polygon_shape(vertices, n_nodes, "regular_polygon", centred=True)
@@ -360,108 +331,6 @@ def signed_distance(shape, points) -> np.ndarray:
     for start in range(0, len(flat), chunk):
         out[start : start + chunk] = _polygon_sdf(shape.vertices, flat[start : start + chunk])
     return out.reshape(p.shape[:-1])
-
-
-def make_level_set(shape, spacing, margin_cells=3) -> LevelSetGrid:
-    """Sample a shape's exact signed distance on a regular grid.
-
-    The grid covers the shape's bounding box, centred on it, plus
-    ``margin_cells`` cells on every side, so that nodes of a neighbour slightly
-    outside the shape still read a meaningful (positive) distance.
-
-    Parameters
-    ----------
-    shape : Shape
-    spacing : float
-        Grid spacing, > 0 (the scene's ``ls_spacing``).
-    margin_cells : int, optional
-        Cells added beyond the bounding box on each side, >= 1.
-
-    Returns
-    -------
-    LevelSetGrid
-
-    Examples
-    --------
-    >>> g = make_level_set(square(1.0), 0.25, margin_cells=1)
-    >>> g.phi.shape, g.origin.tolist()
-    ((7, 7), [-0.75, -0.75])
-    """
-    h = _positive("spacing", spacing)
-    try:
-        margin = operator.index(margin_cells)
-    except TypeError:
-        raise ValueError(f"margin_cells must be an integer, got {margin_cells!r}") from None
-    if margin < 1:
-        raise ValueError(f"margin_cells must be >= 1, got {margin}")
-    if shape.kind == "circle":
-        lo = np.full(2, -shape.radius)
-        hi = np.full(2, shape.radius)
-    else:
-        lo = shape.vertices.min(axis=0)
-        hi = shape.vertices.max(axis=0)
-    # The small allowance keeps a box that is a whole number of cells wide from
-    # gaining a cell to round-off; the slack of a partial cell is split evenly
-    # so symmetric shapes get symmetric grids.
-    cells = np.ceil((hi - lo) / h - 1e-9).astype(int)
-    origin = lo - 0.5 * (cells * h - (hi - lo)) - margin * h
-    nx, ny = cells + 2 * margin + 1
-    gx = origin[0] + h * np.arange(nx)
-    gy = origin[1] + h * np.arange(ny)
-    pts = np.stack(np.meshgrid(gx, gy, indexing="ij"), axis=-1)
-    phi = signed_distance(shape, pts)
-    return LevelSetGrid(origin=_frozen(origin), spacing=h, phi=_frozen(phi))
-
-
-def sample(grid, points) -> tuple[np.ndarray, np.ndarray]:
-    """Bilinear level-set value and its gradient at body-frame points.
-
-    The gradient is that of the bilinear interpolant itself (what the contact
-    kernels normalise into a contact normal), not a finite-difference stencil.
-
-    Parameters
-    ----------
-    grid : LevelSetGrid
-    points : array_like of shape (..., 2)
-        Body-frame points.
-
-    Returns
-    -------
-    phi : ndarray of shape (...)
-        Interpolated signed distance; `OUTSIDE_PHI` for points outside the grid.
-    grad : ndarray of shape (..., 2)
-        Gradient of the interpolant; zero outside the grid.
-
-    Examples
-    --------
-    >>> g = make_level_set(square(1.0), 0.05)
-    >>> phi, grad = sample(g, [[0.6, 0.0], [9.0, 9.0]])
-    >>> phi.round(12).tolist(), grad.round(12).tolist()
-    ([0.1, 1e+30], [[1.0, 0.0], [0.0, 0.0]])
-    """
-    p = np.asarray(points, dtype=float)
-    if p.shape[-1:] != (2,):
-        raise ValueError(f"points must have shape (..., 2), got {p.shape}")
-    nx, ny = grid.phi.shape
-    u = (p[..., 0] - grid.origin[0]) / grid.spacing
-    w = (p[..., 1] - grid.origin[1]) / grid.spacing
-    # Written so that NaN coordinates also land outside.
-    inside = (u >= 0) & (u <= nx - 1) & (w >= 0) & (w <= ny - 1)
-    u = np.where(inside, u, 0.0)
-    w = np.where(inside, w, 0.0)
-    # A point on the last grid line belongs to the last cell, at t = 1.
-    i = np.minimum(np.floor(u).astype(int), nx - 2)
-    j = np.minimum(np.floor(w).astype(int), ny - 2)
-    tx = u - i
-    ty = w - j
-    f = grid.phi
-    f00, f10, f01, f11 = f[i, j], f[i + 1, j], f[i, j + 1], f[i + 1, j + 1]
-    phi = (1 - tx) * (1 - ty) * f00 + tx * (1 - ty) * f10 + (1 - tx) * ty * f01 + tx * ty * f11
-    gx = ((1 - ty) * (f10 - f00) + ty * (f11 - f01)) / grid.spacing
-    gy = ((1 - tx) * (f01 - f00) + tx * (f11 - f10)) / grid.spacing
-    phi = np.where(inside, phi, OUTSIDE_PHI)
-    grad = np.where(inside[..., None], np.stack([gx, gy], axis=-1), 0.0)
-    return phi, grad
 
 
 def transform(points_body, x, theta) -> np.ndarray:
@@ -591,91 +460,12 @@ def overlaps(shape_a, xa, ta, shape_b, xb, tb, gap=0.0) -> bool:
     return False
 
 
-def stack(shapes, spacings) -> dict:
-    """Lay all templates' level sets and surface nodes out in flat arrays.
-
-    This is the layout the Taichi fields take: one flat level-set array with a
-    per-template offset, shape, origin and spacing, and the surface nodes of all
-    templates one after another (nodes are stored once per template and moved
-    with each particle on the fly).
-
-    Parameters
-    ----------
-    shapes : sequence of Shape
-        The templates; template ``k`` is ``shapes[k]``.
-    spacings : sequence of float or None
-        Level-set spacing of each template. ``None`` is allowed for a circle and
-        builds no grid for it: disks use the analytic contact.
-
-    Returns
-    -------
-    dict of ndarray
-        With ``T = len(shapes)``:
-
-        * ``ls_phi`` (sum nx*ny,) float64: grid ``k`` flattened x-first, value
-          ``(i, j)`` at ``ls_offset[k] + i * ny + j``;
-        * ``ls_offset`` (T,) int32; ``ls_shape`` (T, 2) int32, ``(nx, ny)``,
-          ``(0, 0)`` where no grid was built;
-        * ``ls_origin`` (T, 2), ``ls_spacing`` (T,) float64 (0 where no grid);
-        * ``node_pos`` (N, 2), ``node_len`` (N,), ``node_normal`` (N, 2) float64;
-        * ``node_offset``, ``node_count`` (T,) int32;
-        * ``is_circle`` (T,) int32; ``radius``, ``bounding_radius`` (T,) float64.
-
-    Examples
-    --------
-    >>> d = stack([circle(1.0), square(1.0)], [None, 0.1])
-    >>> d["ls_shape"].tolist(), d["ls_offset"].tolist(), d["node_offset"].tolist()
-    ([[0, 0], [17, 17]], [0, 0], [0, 40])
-    """
-    shapes = list(shapes)
-    spacings = list(spacings)
-    if len(shapes) != len(spacings):
-        raise ValueError(f"got {len(shapes)} shapes but {len(spacings)} spacings")
-    t = len(shapes)
-    ls_offset = np.zeros(t, dtype=np.int32)
-    ls_shape = np.zeros((t, 2), dtype=np.int32)
-    ls_origin = np.zeros((t, 2))
-    ls_spacing = np.zeros(t)
-    phis = []
-    total = 0
-    for k, (shape, h) in enumerate(zip(shapes, spacings)):
-        ls_offset[k] = total
-        if h is None:
-            if shape.kind != "circle":
-                raise ValueError(
-                    f"template {k} ({shape.name}) is a polygon and needs a level-set spacing, got None"
-                )
-            continue
-        grid = make_level_set(shape, h)
-        ls_shape[k] = grid.phi.shape
-        ls_origin[k] = grid.origin
-        ls_spacing[k] = grid.spacing
-        phis.append(grid.phi.ravel())  # C order: index i * ny + j
-        total += grid.phi.size
-    counts = np.array([len(s.nodes) for s in shapes], dtype=np.int32)
-    return {
-        "ls_phi": np.concatenate(phis) if phis else np.zeros(0),
-        "ls_offset": ls_offset,
-        "ls_shape": ls_shape,
-        "ls_origin": ls_origin,
-        "ls_spacing": ls_spacing,
-        "node_pos": _concat([s.nodes for s in shapes], (0, 2)),
-        "node_len": _concat([s.node_lengths for s in shapes], (0,)),
-        "node_normal": _concat([s.node_normals for s in shapes], (0, 2)),
-        "node_offset": (np.cumsum(counts) - counts).astype(np.int32),
-        "node_count": counts,
-        "is_circle": np.array([s.kind == "circle" for s in shapes], dtype=np.int32),
-        "radius": np.array([s.radius for s in shapes], dtype=float),
-        "bounding_radius": np.array([s.bounding_radius for s in shapes], dtype=float),
-    }
-
-
 # ---------------------------------------------------------------------------
 # Internals
 # ---------------------------------------------------------------------------
 
 
-def _positive(name, value) -> float:
+def check_positive(name, value) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -700,13 +490,13 @@ def _box(width, height) -> np.ndarray:
     return np.array([[-hw, -hh], [hw, -hh], [hw, hh], [-hw, hh]])
 
 
-def _frozen(a) -> np.ndarray:
+def frozen(a) -> np.ndarray:
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
 
 
-def _concat(arrays, empty_shape) -> np.ndarray:
+def concat_arrays(arrays, empty_shape) -> np.ndarray:
     return np.concatenate(arrays) if arrays else np.zeros(empty_shape)
 
 
@@ -716,16 +506,16 @@ def _make_shape(*, name, kind, vertices, area, perimeter, inertia_per_mass, boun
         name=name,
         kind=kind,
         radius=float(bounding_radius),
-        vertices=None if vertices is None else _frozen(vertices),
+        vertices=None if vertices is None else frozen(vertices),
         area=float(area),
         perimeter=float(perimeter),
         inertia_per_mass=float(inertia_per_mass),
         bounding_radius=float(bounding_radius),
         equivalent_diameter=math.sqrt(4.0 * area / math.pi),
         sphericity=math.sqrt(4.0 * math.pi * area) / perimeter,
-        nodes=_frozen(nodes),
-        node_lengths=_frozen(node_lengths),
-        node_normals=_frozen(node_normals),
+        nodes=frozen(nodes),
+        node_lengths=frozen(node_lengths),
+        node_normals=frozen(node_normals),
     )
 
 

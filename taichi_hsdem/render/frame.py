@@ -1,36 +1,19 @@
-"""Off-screen frames of a simulation and their H.264 video.
+"""Off-screen frames of a simulation.
 
 A frame shows the walls (grey), the fluid region coloured by the pressure field
 (a viridis-like map with a colour bar), and every particle with its true shape
-and orientation. It is drawn with Taichi's GGUI on an invisible window (Vulkan;
-on a machine without a GPU the Mesa software driver from the Debian packages
-``mesa-vulkan-drivers libvulkan1`` does it) and read back as a numpy image, to
-which a strip with the time, the escapee count and the colour bar's range is
-added in numpy with a small built-in bitmap font.
-
-What GGUI needs, and how this module deals with it:
-
-* **Vulkan.** :func:`vulkan_status` probes it once per process in a subprocess
-  (a broken driver may crash the process that tries it); :class:`Renderer`
-  refuses to start, with the reason, when the probe failed.
-* **One window per process.** Every :class:`Renderer` draws into the same
-  hidden window, created on first use. A renderer of another size, or a new
-  Taichi program (``ti.init`` called again), destroys and recreates it, so
-  renderers of different sizes may be used in turn (each switch costs a window
-  creation). Two live GGUI windows, or a window outliving its Taichi program,
-  crash the interpreter at exit; this module never leaves either behind.
-* **No file in the user's folder.** Dear ImGui, inside GGUI, writes
-  ``imgui.ini`` into the current directory when a window is destroyed (also at
-  exit). Windows are therefore created and destroyed with the process inside a
-  private temporary folder, and an ``atexit`` hook destroys the window there
-  and removes the folder. Nothing here calls ``window.get_gui()`` or
-  ``window.show()`` (``show`` crashes without a display).
-* **Redraw before capture.** The window's image is cleared after every
-  capture, so :meth:`Renderer.draw` draws everything each time.
+and orientation. It is drawn with Taichi's GGUI on the process's hidden window
+(:mod:`.window`; on a machine without a GPU the Mesa software driver from the
+Debian packages ``mesa-vulkan-drivers libvulkan1`` does it) and read back as a
+numpy image, to which a strip with the time, the escapee count and the colour
+bar's range is added with the built-in bitmap font (:mod:`.font`). The window's
+image is cleared after every capture, so :meth:`Renderer.draw` draws everything
+each time. :mod:`.video` writes the frames as H.264.
 
 Examples
 --------
->>> from taichi_hsdem import render, shapes                      # doctest: +SKIP
+>>> from taichi_hsdem import render                              # doctest: +SKIP
+>>> from taichi_hsdem.geometry import shapes                      # doctest: +SKIP
 >>> r = render.Renderer((0, 4, 0, 2), outline, [], [shapes.circle(0.3)],
 ...                     pressure_shape=(40, 20), pressure_range=(0, 100))
 >>> with render.VideoWriter("video.mp4", fps=25) as video:
@@ -38,25 +21,16 @@ Examples
 """
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
-import atexit
-import contextlib
-import functools
-import math
-import os
-import shutil
-import subprocess
-import sys
-import tempfile
-
 import numpy as np
 import taichi as ti
 from taichi.lang import impl
 
-from .. import backend
 from ..geometry.polygon import signed_area, triangle_areas, triangulate
+from .font import GLYPH_H, even, format_time, stamp, text_mask
+from .window import (acquire_window, close_window, ensure_taichi, taichi_logging_at_least,
+                     vulkan_status)
 
-__all__ = ["vulkan_status", "colormap", "triangulate", "Renderer", "VideoWriter",
-           "close_window"]
+__all__ = ["colormap", "Renderer"]
 
 # ---------------------------------------------------------------------------
 # Colours, as 8-bit RGB so that what the tests read back is exact.
@@ -94,7 +68,6 @@ _BACKGROUND_PALETTE = np.vstack([_LUT, FLUID_PLAIN, WALL_GREY]).astype(np.uint8)
 _CIRCLE_SEGMENTS = 32
 _OUTLINE_PX = 1.25          # outline width, pixels
 _TICK_FROM, _TICK_TO, _TICK_HALF_WIDTH = 0.35, 0.92, 0.1   # disk tick, radii
-_GLYPH_W, _GLYPH_H = 5, 7   # bitmap font cell, before scaling
 
 # Roles of a template's local vertices, which decide their colour.
 _ROLE_OUTLINE, _ROLE_FILL = 0, 1
@@ -123,147 +96,6 @@ def colormap(s) -> np.ndarray:
 
 def _lut_index(s):
     return np.clip(np.rint(s * (_LUT_SIZE - 1)), 0, _LUT_SIZE - 1).astype(np.int32)
-
-
-# ---------------------------------------------------------------------------
-# Vulkan probe
-
-_PACKAGES_HINT = ("Off-screen rendering uses Taichi GGUI, which needs a Vulkan driver; "
-                  "on a machine without a GPU install the Mesa software driver: "
-                  "apt-get install mesa-vulkan-drivers libvulkan1 (Debian packages "
-                  "mesa-vulkan-drivers, libvulkan1)")
-
-# Draws one red triangle on black and checks a pixel inside it, so that a driver
-# that opens but renders nothing is caught too.
-_PROBE = """
-import numpy as np, taichi as ti
-ti.init(arch=ti.cpu, log_level=ti.ERROR)
-w = ti.ui.Window("probe", (16, 16), vsync=False, show_window=False)
-c = w.get_canvas()
-v = ti.Vector.field(2, ti.f32, 3)
-v.from_numpy(np.array([[0, 0], [1, 0], [0, 1]], np.float32))
-c.set_background_color((0.0, 0.0, 0.0))
-c.triangles(v, color=(1.0, 0.0, 0.0))
-img = w.get_image_buffer_as_numpy()
-ok = img.shape[:2] == (16, 16) and img[2, 2, 0] > 0.9 and img[13, 13, 0] < 0.1
-w.destroy()
-print("GGUI-OK" if ok else "GGUI-WRONG-PIXELS")
-"""
-
-
-@functools.cache
-def vulkan_status() -> tuple[bool, str]:
-    """Whether off-screen GGUI rendering works in this environment.
-
-    The probe (create a hidden window, draw a triangle, read it back) runs once
-    per process in a subprocess, in a temporary folder, so that a crashing
-    driver cannot take the caller down and no file is left behind; the answer
-    is cached.
-
-    Returns
-    -------
-    ok : bool
-    reason : str
-        When not ok: what failed and which Debian packages provide the
-        software Vulkan driver (``mesa-vulkan-drivers libvulkan1``).
-
-    Examples
-    --------
-    >>> ok, reason = vulkan_status()        # doctest: +SKIP
-    """
-    with tempfile.TemporaryDirectory(prefix="taichi_hsdem_probe_") as tmp:
-        try:
-            proc = subprocess.run([sys.executable, "-c", _PROBE], cwd=tmp,
-                                  capture_output=True, text=True, timeout=180)
-        except subprocess.TimeoutExpired:
-            return False, f"the Vulkan probe hung for 180 s. {_PACKAGES_HINT}"
-    if proc.returncode == 0 and "GGUI-OK" in proc.stdout:
-        return True, "off-screen GGUI rendering works"
-    if proc.returncode < 0:
-        detail = f"the probe process was killed by signal {-proc.returncode}"
-    else:
-        # The last stderr line is the exception ("RuntimeError: Vulkan must be
-        # available for GGUI"); stdout holds Taichi's banner.
-        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-        lines = lines or [ln for ln in proc.stdout.splitlines() if ln.strip()]
-        detail = lines[-1].strip() if lines else f"exit status {proc.returncode}"
-    return False, f"GGUI could not render ({detail}). {_PACKAGES_HINT}"
-
-
-# ---------------------------------------------------------------------------
-# The process's one GGUI window
-
-_DISPLAY = {"window": None, "size": None, "prog": None, "dir": None}
-
-
-@contextlib.contextmanager
-def _in_private_dir():
-    """Run with the cwd in this module's temporary folder (ImGui writes
-    ``imgui.ini`` into the cwd when a window is destroyed)."""
-    if _DISPLAY["dir"] is None:
-        _DISPLAY["dir"] = tempfile.mkdtemp(prefix="taichi_hsdem_ggui_")
-        atexit.register(_shutdown)
-    previous = os.getcwd()
-    os.chdir(_DISPLAY["dir"])
-    try:
-        yield
-    finally:
-        os.chdir(previous)
-
-
-def _shutdown():
-    close_window()
-    if _DISPLAY["dir"] is not None:
-        shutil.rmtree(_DISPLAY["dir"], ignore_errors=True)
-        _DISPLAY["dir"] = None
-
-
-def close_window() -> None:
-    """Destroy the shared hidden window, if any (the next draw makes a new one).
-
-    Done at exit automatically, and on the next draw after ``ti.init`` or
-    ``ti.reset``; call it to free the window's memory earlier.
-    """
-    window = _DISPLAY["window"]
-    if window is None:
-        return
-    _DISPLAY.update(window=None, size=None, prog=None)
-    with _in_private_dir():
-        window.destroy()
-
-
-def _acquire_window(size):
-    """The shared window at ``size`` (width, height) for the current program."""
-    prog = impl.get_runtime().prog
-    if _DISPLAY["window"] is not None and (_DISPLAY["size"] != size
-                                           or _DISPLAY["prog"] is not prog):
-        close_window()
-    if _DISPLAY["window"] is None:
-        with _in_private_dir(), _taichi_logging_at_least("warn"):
-            window = ti.ui.Window("taichi_hsdem", size, vsync=False, show_window=False)
-        _DISPLAY.update(window=window, size=size, prog=prog)
-    return _DISPLAY["window"]
-
-
-@contextlib.contextmanager
-def _taichi_logging_at_least(level):
-    """Silence Taichi's C++ logger below ``level`` (the capture logs one info
-    line per frame), restoring the caller's level afterwards."""
-    levels = ("trace", "debug", "info", "warn", "error", "critical")
-    current = next((lv for lv in levels if ti.is_logging_effective(lv)), "critical")
-    if levels.index(current) >= levels.index(level):
-        yield
-        return
-    ti.set_logging_level(level)
-    try:
-        yield
-    finally:
-        ti.set_logging_level(current)
-
-
-def _ensure_taichi():
-    if impl.get_runtime().prog is None:
-        backend.init("cpu")
 
 
 # ---------------------------------------------------------------------------
@@ -430,81 +262,6 @@ def _capture_to_frame(buffer: ti.types.ndarray(dtype=ti.f32, ndim=3),
 
 
 # ---------------------------------------------------------------------------
-# Bitmap font: 5x7 cells, one hex byte per row, bit 4 = leftmost column.
-
-_FONT_HEX = {
-    " ": "00000000000000", "0": "0E11131519110E", "1": "040C040404040E",
-    "2": "0E11010204081F", "3": "1F02040201110E", "4": "02060A121F0202",
-    "5": "1F101E0101110E", "6": "0608101E11110E", "7": "1F010204080808",
-    "8": "0E11110E11110E", "9": "0E11110F01020C",
-    "A": "0E11111F111111", "B": "1E11111E11111E", "C": "0E11101010110E",
-    "D": "1C12111111121C", "E": "1F10101E10101F", "F": "1F10101E101010",
-    "G": "0E11101711110F", "H": "1111111F111111",
-    "I": "0E04040404040E", "J": "0702020202120C", "K": "11121418141211",
-    "L": "1010101010101F", "M": "111B1515111111", "N": "11111915131111",
-    "O": "0E11111111110E", "P": "1E11111E101010", "Q": "0E11111115120D",
-    "R": "1E11111E141211", "S": "0F10100E01011E", "T": "1F040404040404",
-    "U": "1111111111110E", "V": "11111111110A04", "W": "1111111515150A",
-    "X": "11110A040A1111", "Y": "1111110A040404", "Z": "1F01020408101F",
-    "a": "00000E010F110F", "b": "1010161911111E",
-    "c": "00000E1010110E", "d": "01010D1311110F", "e": "00000E111F100E",
-    "f": "0609081C080808", "g": "000F11110F010E", "h": "10101619111111",
-    "i": "04000C0404040E", "j": "0200060202120C", "k": "10101214181412",
-    "l": "0C04040404040E", "m": "00001A15151111", "n": "00001619111111",
-    "o": "00000E1111110E", "p": "00001E111E1010", "q": "00000D130F0101",
-    "r": "00001619101010", "s": "00000E100E011E", "t": "08081C08080906",
-    "u": "0000111111130D", "v": "00001111110A04", "w": "0000111115150A",
-    "x": "0000110A040A11", "y": "000011110F010E",
-    "z": "00001F0204081F",
-    ".": "00000000000C0C", ",": "000000000C0408",
-    ":": "000C0C000C0C00", ";": "000C0C000C0408", "-": "0000001F000000",
-    "+": "0004041F040400", "=": "00001F001F0000", "_": "0000000000001F",
-    "/": "01010204081010", "(": "02040808080402", ")": "08040202020408",
-    "[": "0E08080808080E", "]": "0E02020202020E", "%": "18190204081303",
-    "!": "04040404040004", "?": "0E110102040004", "#": "0A0A1F0A1F0A0A",
-    "*": "0004150E150400", "<": "02040810080402", ">": "08040201020408",
-    "'": "04040800000000", '"': "0A0A0000000000", "^": "040A1100000000",
-    "|": "04040404040404", "~": "00000815020000",
-}
-
-
-def _glyph_cell(hex_rows):
-    """A (7, 6) boolean character cell: the 5-pixel glyph and a blank column."""
-    rows = [int(hex_rows[2 * r:2 * r + 2], 16) for r in range(_GLYPH_H)]
-    return np.array([[(row >> (_GLYPH_W - 1 - c)) & 1 for c in range(_GLYPH_W)] + [0]
-                     for row in rows], dtype=bool)
-
-
-_GLYPH_CELLS = {ch: _glyph_cell(code) for ch, code in _FONT_HEX.items()}
-
-
-def _text_mask(text, scale):
-    """Boolean (7 scale, 6 scale len(text)) image of ``text``, each font pixel a
-    ``scale`` x ``scale`` block; unknown characters print as '?'."""
-    if not text:
-        return np.zeros((_GLYPH_H * scale, 0), dtype=bool)
-    line = np.hstack([_GLYPH_CELLS.get(ch, _GLYPH_CELLS["?"]) for ch in text])
-    return line.repeat(scale, axis=0).repeat(scale, axis=1)
-
-
-def _stamp(image, mask, row, col, colour):
-    """Paint ``colour`` where ``mask`` is set, top-left at (row, col), clipped."""
-    h = max(0, min(mask.shape[0], image.shape[0] - row))
-    w = max(0, min(mask.shape[1], image.shape[1] - col))
-    if h and w:
-        image[row:row + h, col:col + w][mask[:h, :w]] = colour
-
-
-def _format_time(t):
-    t = float(t)
-    return f"{t:.3f}" if t == 0.0 or 1e-2 <= abs(t) < 1e5 else f"{t:.3e}"
-
-
-def _even(n):
-    return max(2, 2 * int(round(n / 2.0)))
-
-
-# ---------------------------------------------------------------------------
 
 class Renderer:
     """Draws frames of one scene at a fixed size.
@@ -565,10 +322,10 @@ class Renderer:
         if not shapes:
             raise ValueError("shapes must hold at least one particle template")
         self.bbox = (x_min, x_max, y_min, y_max)
-        self.width = _even(int(width))
-        self.domain_height = _even(self.width * (y_max - y_min) / (x_max - x_min))
+        self.width = even(int(width))
+        self.domain_height = even(self.width * (y_max - y_min) / (x_max - x_min))
         self._scale = max(1, int(round(self.width / 480)))  # font and strip scale
-        self.strip_height = _even((_GLYPH_H + 8) * self._scale)
+        self.strip_height = even((GLYPH_H + 8) * self._scale)
         self.height = self.domain_height + self.strip_height
         self.title = str(title)
 
@@ -614,7 +371,7 @@ class Renderer:
 
         self._plain_cells = np.full((1, 1), _PLAIN_INDEX, dtype=np.int32)
 
-        _ensure_taichi()
+        ensure_taichi()
         starts = np.cumsum([0] + [len(p) for p in polygons]).astype(np.int32)
         self._mask = np.zeros((self.width, self.domain_height), dtype=np.uint8)
         _fluid_mask(np.ascontiguousarray(np.vstack(polygons)), starts, x_min, y_min,
@@ -629,7 +386,7 @@ class Renderer:
     def _fields_for(self, capacity):
         """(background, vertices, vertex colours) fields of the current Taichi
         program, the vertex ones holding at least ``capacity`` entries."""
-        _ensure_taichi()
+        ensure_taichi()
         prog = impl.get_runtime().prog
         if prog is not self._prog:
             # A new program (or none yet): the old fields died with the old one.
@@ -739,11 +496,11 @@ class Renderer:
                          (x_min, y_min), (1.0 / (x_max - x_min), 1.0 / (y_max - y_min)),
                          used, verts, colours)
 
-        window = _acquire_window((self.width, self.domain_height))
+        window = acquire_window((self.width, self.domain_height))
         canvas = window.get_canvas()
         canvas.set_image(background)
         canvas.triangles(verts, per_vertex_color=colours)
-        with _taichi_logging_at_least("warn"):
+        with taichi_logging_at_least("warn"):
             buffer = window.get_image_buffer_as_numpy()
 
         frame = np.empty((self.height, self.width, 3), dtype=np.uint8)
@@ -780,26 +537,26 @@ class Renderer:
     def _draw_strip(self, strip, t, escapees, p_range):
         k = self._scale
         strip[:] = STRIP_BACKGROUND
-        top = (strip.shape[0] - _GLYPH_H * k) // 2
+        top = (strip.shape[0] - GLYPH_H * k) // 2
         text_end = strip.shape[1]
         if p_range is not None:
             # From the right: p_max label, colour bar, p_min label, "p".
             bar_width = max(64, self.width // 5)
-            hi = _text_mask(f"{p_range[1]:.3g}", k)
-            lo = _text_mask(f"p {p_range[0]:.3g}", k)
+            hi = text_mask(f"{p_range[1]:.3g}", k)
+            lo = text_mask(f"p {p_range[0]:.3g}", k)
             col = strip.shape[1] - 4 * k - hi.shape[1]
-            _stamp(strip, hi, top, col, TEXT_COLOR)
+            stamp(strip, hi, top, col, TEXT_COLOR)
             col -= 2 * k + bar_width
-            strip[top:top + _GLYPH_H * k, col:col + bar_width] = colormap(
+            strip[top:top + GLYPH_H * k, col:col + bar_width] = colormap(
                 np.linspace(0.0, 1.0, bar_width))[None, :, :]
             col -= 2 * k + lo.shape[1]
-            _stamp(strip, lo, top, col, TEXT_COLOR)
+            stamp(strip, lo, top, col, TEXT_COLOR)
             text_end = col - 6 * k
-        text = f"t = {_format_time(t)} s   escapees {int(escapees)}"
+        text = f"t = {format_time(t)} s   escapees {int(escapees)}"
         if self.title:
             text = f"{self.title}   {text}"
-        mask = _text_mask(text, k)[:, :max(0, text_end - 4 * k)]
-        _stamp(strip, mask, top, 4 * k, TEXT_COLOR)
+        mask = text_mask(text, k)[:, :max(0, text_end - 4 * k)]
+        stamp(strip, mask, top, 4 * k, TEXT_COLOR)
 
     def close(self):
         """Free this renderer's Taichi fields and the shared window (a later
@@ -809,79 +566,6 @@ class Renderer:
                 tree.destroy()
         self._prog, self._trees, self._capacity = None, [], 0
         close_window()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-
-# ---------------------------------------------------------------------------
-
-class VideoWriter:
-    """H.264 (libx264, yuv420p) MP4 writer for frames from :meth:`Renderer.draw`.
-
-    Frames are written at their own size: imageio-ffmpeg's default
-    ``macro_block_size=16`` would rescale any size that is not a multiple of
-    16, so it is set to 1, and frames must have even width and height
-    (yuv420p halves the chroma resolution), which the renderer guarantees.
-
-    Parameters
-    ----------
-    path : str or path-like
-        Output file (``.mp4``); its folder must exist.
-    fps : float
-        Frames per second, > 0.
-    quality : float, optional
-        imageio-ffmpeg quality in [1, 10]; 7 gives libx264 ``-crf 15``.
-
-    Examples
-    --------
-    >>> with VideoWriter("out.mp4", fps=25) as video:        # doctest: +SKIP
-    ...     video.write(frame)
-    """
-
-    def __init__(self, path, fps, quality=7):
-        fps = float(fps)
-        if not (math.isfinite(fps) and fps > 0):
-            raise ValueError(f"fps must be a positive number, got {fps}")
-        self.path = os.fspath(path)
-        folder = os.path.dirname(os.path.abspath(self.path))
-        if not os.path.isdir(folder):
-            raise FileNotFoundError(f"folder for the video does not exist: {folder}")
-        self.fps = fps
-        self.quality = quality
-        self.frames = 0
-        self._size = None
-        self._writer = None
-
-    def write(self, frame):
-        """Append one (H, W, 3) uint8 frame; all frames must share one size."""
-        frame = np.asarray(frame)
-        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
-            raise ValueError(f"a frame must be an (H, W, 3) uint8 array, got "
-                             f"{frame.shape} {frame.dtype}")
-        if frame.shape[0] % 2 or frame.shape[1] % 2:
-            raise ValueError(f"H.264 yuv420p needs even frame sizes, got {frame.shape[:2]}")
-        if self._writer is None:
-            import imageio.v2 as imageio
-            self._size = frame.shape[:2]
-            self._writer = imageio.get_writer(
-                self.path, format="FFMPEG", mode="I", fps=self.fps, codec="libx264",
-                pixelformat="yuv420p", quality=self.quality, macro_block_size=1,
-                ffmpeg_log_level="error")
-        elif frame.shape[:2] != self._size:
-            raise ValueError(f"frame size {frame.shape[:2]} differs from the first "
-                             f"frame's {self._size}")
-        self._writer.append_data(frame)
-        self.frames += 1
-
-    def close(self):
-        """Finish the file (no file is written if no frame was)."""
-        if self._writer is not None:
-            self._writer.close()
-            self._writer = None
 
     def __enter__(self):
         return self

@@ -24,7 +24,7 @@ def display_available() -> tuple[bool, str]:
 
 
 class LiveViewer:
-    """Shows the frames a :class:`~taichi_hsdem.output.VideoRecorder` draws.
+    """Shows the frames a :class:`~taichi_hsdem.render.VideoRecorder` draws.
 
     Pass it as the recorder's ``viewer``; :meth:`show` is called with each frame
     (a top-down (H, W, 3) uint8 image) and returns when the run may go on.

@@ -4,8 +4,19 @@
 :mod:`.load` validates a TOML table or dict against them, and :mod:`.toml` reads
 and writes the files.
 """
-from .keys import (AUTO, ClogConfig, ContactConfig, DampingConfig, FeedConfig, FluidConfig,
-                   GeometryConfig, OutputConfig, RunConfig, SceneError, SpeciesConfig)
+from .keys import (
+                   AUTO,
+                   ClogConfig,
+                   ContactConfig,
+                   DampingConfig,
+                   FeedConfig,
+                   FluidConfig,
+                   GeometryConfig,
+                   OutputConfig,
+                   RunConfig,
+                   SceneError,
+                   SpeciesConfig,
+)
 from .load import Scene, load_scene
 from .toml import read_toml, scene_to_toml
 

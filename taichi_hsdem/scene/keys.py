@@ -1,7 +1,7 @@
 """The keys of a scene: one frozen dataclass per TOML table, one field per key.
 
 Each key's kind, unit, allowed range and documentation live in the field's
-``metadata["spec"]`` (a :class:`_Spec`) and drive both the validation
+``metadata["spec"]`` (a :class:`Spec`) and drive both the validation
 (:mod:`.load`) and ``docs/scene.md``, so the documentation of a key and its check
 cannot drift apart.
 """
@@ -39,7 +39,7 @@ class SceneError(ValueError):
 # --------------------------------------------------------------------------- keys
 
 @dataclass(frozen=True)
-class _Spec:
+class Spec:
     """What one scene key accepts."""
 
     kind: str  # "float", "int", "bool", "str", "choice", "points", "poses", "polygons", "interval"
@@ -55,25 +55,25 @@ class _Spec:
     only: tuple[str, ...] = ()  # used only by these geometry kinds / particle shapes
 
 
-def _key(kind: str, doc: str, default: Any = None, **spec: Any) -> Any:
-    return field(default=default, metadata={"spec": _Spec(kind, doc, **spec)})
+def keyfield(kind: str, doc: str, default: Any = None, **spec: Any) -> Any:
+    return field(default=default, metadata={"spec": Spec(kind, doc, **spec)})
 
 
-def _specs(cls) -> dict[str, _Spec]:
+def key_specs(cls) -> dict[str, Spec]:
     return {f.name: f.metadata["spec"] for f in dataclasses.fields(cls)
             if "spec" in f.metadata}
 
 
-def _document(cls):
+def document(cls):
     """Append a numpydoc ``Attributes`` section built from the keys' docs."""
     lines = ["", "Attributes", "----------"]
-    for name, spec in _specs(cls).items():
+    for name, spec in key_specs(cls).items():
         lines += [name, "    " + spec.doc]
     cls.__doc__ = (cls.__doc__ or "").rstrip() + "\n" + "\n".join(lines) + "\n"
     return cls
 
 
-class _Config:
+class Config:
     """Shared behaviour of the frozen config dataclasses."""
 
     def replace(self, **changes: Any):
@@ -82,7 +82,7 @@ class _Config:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict of the keys that have a value (lists for tuples, no ``None``)."""
-        return {name: _plain(getattr(self, name)) for name in _specs(type(self))
+        return {name: _plain(getattr(self, name)) for name in key_specs(type(self))
                 if getattr(self, name) is not None}
 
 
@@ -92,68 +92,68 @@ def _plain(value: Any) -> Any:
     return value
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class RunConfig(_Config):
+class RunConfig(Config):
     """``[run]``: duration, time step, realizations, backend."""
 
-    t_end: float = _key("float", "physical time to simulate, s", required=True, gt=0)
-    dt: float | str = _key("float", 'DEM time step, s, or "auto" (dt_safety times the '
+    t_end: float = keyfield("float", "physical time to simulate, s", required=True, gt=0)
+    dt: float | str = keyfield("float", 'DEM time step, s, or "auto" (dt_safety times the '
                            "critical step 2 sqrt(m_eff/kn))", AUTO, auto=True, gt=0)
-    dt_safety: float = _key("float", 'fraction of the critical step that dt = "auto" '
+    dt_safety: float = keyfield("float", 'fraction of the critical step that dt = "auto" '
                             "uses, dimensionless", 0.15, gt=0, le=1)
-    realizations: int = _key("int", "independent random realizations run together",
+    realizations: int = keyfield("int", "independent random realizations run together",
                              1, ge=1)
-    seed: int = _key("int", "seed of realization 0; realization k uses seed + k", 0,
+    seed: int = keyfield("int", "seed of realization 0; realization k uses seed + k", 0,
                      ge=0)
-    arch: str = _key("choice", "Taichi backend (auto: a GPU when present)", "cpu",
+    arch: str = keyfield("choice", "Taichi backend (auto: a GPU when present)", "cpu",
                      choices=("cpu", "gpu", "auto"))
-    precision: str = _key("choice", "floating point type of the kernels", "f64",
+    precision: str = keyfield("choice", "floating point type of the kernels", "f64",
                           choices=("f64", "f32"))
-    stepping: str = _key("choice", '"fused": many DEM steps per kernel launch, one '
+    stepping: str = keyfield("choice", '"fused": many DEM steps per kernel launch, one '
                          'realization per thread (disks only); "per_step": three launches '
                          'per step, bodies in parallel; "auto": fused for disks on the CPU',
                          AUTO, choices=("auto", "fused", "per_step"))
-    stop_at_clog: bool = _key("bool", "stop a realization once it has clogged", True)
-    force_dt: bool = _key("bool", "accept a dt above the critical step (stability "
+    stop_at_clog: bool = keyfield("bool", "stop a realization once it has clogged", True)
+    force_dt: bool = keyfield("bool", "accept a dt above the critical step (stability "
                           "studies); the run is then watched and reported unstable", False)
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class FluidConfig(_Config):
+class FluidConfig(Config):
     """``[fluid]``: the Hele-Shaw pressure solve."""
 
-    enabled: bool = _key("bool", "false: no pressure solve, no fluid force", True)
-    viscosity: float | None = _key("float", "eta, Pa s (required while enabled)", gt=0)
-    gap: float = _key("float", "H, plate spacing and particle thickness, m",
+    enabled: bool = keyfield("bool", "false: no pressure solve, no fluid force", True)
+    viscosity: float | None = keyfield("float", "eta, Pa s (required while enabled)", gt=0)
+    gap: float = keyfield("float", "H, plate spacing and particle thickness, m",
                       required=True, gt=0)
-    cell_size: float | str = _key("float", 'fluid cell edge, m; "auto": smallest '
+    cell_size: float | str = keyfield("float", 'fluid cell edge, m; "auto": smallest '
                                   "particle d_eq / 6", AUTO, auto=True, gt=0)
-    bc: str = _key("choice", '"pressure": p_in and p_out; "flow_rate": flow_rate in, '
+    bc: str = keyfield("choice", '"pressure": p_in and p_out; "flow_rate": flow_rate in, '
                    "p_out out", "pressure", choices=("pressure", "flow_rate"))
-    p_in: float | None = _key("float", 'inlet pressure, Pa (required for bc = "pressure")')
-    p_out: float = _key("float", "outlet pressure, Pa", 0.0)
-    flow_rate: float | None = _key("float", "Q through the whole gap, m^3/s (required "
+    p_in: float | None = keyfield("float", 'inlet pressure, Pa (required for bc = "pressure")')
+    p_out: float = keyfield("float", "outlet pressure, Pa", 0.0)
+    flow_rate: float | None = keyfield("float", "Q through the whole gap, m^3/s (required "
                                    'for bc = "flow_rate")', gt=0)
-    update_interval: int | str = _key("int", 'DEM steps between pressure solves, or "auto" '
+    update_interval: int | str = keyfield("int", 'DEM steps between pressure solves, or "auto" '
                                       "(the fastest expected particle crosses half a fluid "
                                       "cell between solves)", AUTO, auto=True, ge=1)
-    resolve_fraction: float = _key("float", "re-solve only if more than this fraction "
+    resolve_fraction: float = keyfield("float", "re-solve only if more than this fraction "
                                    "of cells changed permeability (0: always), "
                                    "dimensionless", 0.0, ge=0, lt=1)
-    solver_tol: float = _key("float", "relative residual of the multigrid solve, "
+    solver_tol: float = keyfield("float", "relative residual of the multigrid solve, "
                              "dimensionless", 1e-8, gt=0, le=1e-2)
-    workers: int | str = _key("int", "processes that share the realizations' pressure "
+    workers: int | str = keyfield("int", "processes that share the realizations' pressure "
                               'solves; "auto": one per usable CPU, at most one per '
                               "realization (the answer does not depend on it)", AUTO,
                               auto=True, ge=1)
-    pressure_sampling: str = _key("choice", "how a surface node reads the pressure",
+    pressure_sampling: str = keyfield("choice", "how a surface node reads the pressure",
                                   "bilinear", choices=("bilinear", "cell"))
-    particle_flux: bool = _key("bool", "conserve the mixture: moving particles carry "
+    particle_flux: bool = keyfield("bool", "conserve the mixture: moving particles carry "
                                "their volume (div((kappa/eta) grad p) = div(chi v)); false: "
                                "fluid alone, particles as fixed obstacles (MODEL.md)", False)
-    force_update: str = _key("choice", "when the pressure force on the particles is "
+    force_update: str = keyfield("choice", "when the pressure force on the particles is "
                              "evaluated: at each pressure solve and held in between "
                              '("solve"), or at every DEM step from the last pressure field '
                              '("step")', "solve", choices=("solve", "step"))
@@ -162,53 +162,53 @@ class FluidConfig(_Config):
 _HOURGLASS, _CONVERGING, _POLYGON = ("hourglass",), ("converging",), ("polygon",)
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class GeometryConfig(_Config):
+class GeometryConfig(Config):
     """``[geometry]``: the fluid region; keys of the other kinds are ``None``."""
 
-    kind: str = _key("choice", "the outline generator", required=True,
+    kind: str = keyfield("choice", "the outline generator", required=True,
                      choices=("hourglass", "converging", "polygon"))
-    wall_cell_size: float | str = _key("float", 'wall level-set spacing, m; "auto": '
+    wall_cell_size: float | str = keyfield("float", 'wall level-set spacing, m; "auto": '
                                        "smallest d_eq / 10", AUTO, auto=True, gt=0)
-    escape_offset: float | None = _key("float", "escape line distance downstream of "
+    escape_offset: float | None = keyfield("float", "escape line distance downstream of "
                                        "the constriction's exit, m (None: 0.5 max "
                                        "d_eq, resolved by the run)", ge=0)
     # kind = "hourglass"
-    length: float | None = _key("float", "channel length, m", required=True, gt=0,
+    length: float | None = keyfield("float", "channel length, m", required=True, gt=0,
                                 only=_HOURGLASS)
-    width: float | None = _key("float", "channel width, m", required=True, gt=0,
+    width: float | None = keyfield("float", "channel width, m", required=True, gt=0,
                                only=_HOURGLASS)
-    neck_width: float | None = _key("float", "narrowest width, m, < width",
+    neck_width: float | None = keyfield("float", "narrowest width, m, < width",
                                     required=True, gt=0, only=_HOURGLASS)
-    neck_x: float | None = _key("float", "neck position from the inlet, m (default "
+    neck_x: float | None = keyfield("float", "neck position from the inlet, m (default "
                                 "length / 2)", only=_HOURGLASS)
-    taper_length: float | None = _key("float", "length over which each side narrows, "
+    taper_length: float | None = keyfield("float", "length over which each side narrows, "
                                       "m (default width)", gt=0, only=_HOURGLASS)
     # kind = "converging"
-    width_in: float | None = _key("float", "upstream channel width, m", required=True,
+    width_in: float | None = keyfield("float", "upstream channel width, m", required=True,
                                   gt=0, only=_CONVERGING)
-    length_in: float | None = _key("float", "upstream straight length, m",
+    length_in: float | None = keyfield("float", "upstream straight length, m",
                                    required=True, gt=0, only=_CONVERGING)
-    angle: float | None = _key("float", "convergence half-angle, degrees", 45.0, gt=0,
+    angle: float | None = keyfield("float", "convergence half-angle, degrees", 45.0, gt=0,
                                le=90, only=_CONVERGING)
-    constriction_width: float | None = _key("float", "W, m, < width_in", required=True,
+    constriction_width: float | None = keyfield("float", "W, m, < width_in", required=True,
                                             gt=0, only=_CONVERGING)
-    constriction_length: float | None = _key("float", "straight constriction length, "
+    constriction_length: float | None = keyfield("float", "straight constriction length, "
                                              "m", 0.0, ge=0, only=_CONVERGING)
-    width_out: float | None = _key("float", "outlet channel width, m, >= "
+    width_out: float | None = keyfield("float", "outlet channel width, m, >= "
                                    "constriction_width (default width_in)", gt=0,
                                    only=_CONVERGING)
-    length_out: float | None = _key("float", "outlet channel length, m", required=True,
+    length_out: float | None = keyfield("float", "outlet channel length, m", required=True,
                                     gt=0, only=_CONVERGING)
     # kind = "polygon"
-    outline: tuple[tuple[float, float], ...] | None = _key(
+    outline: tuple[tuple[float, float], ...] | None = keyfield(
         "points", "the fluid region, a simple polygon of [x, y] vertices, m",
         required=True, min_len=3, only=_POLYGON)
-    obstacles: tuple[tuple[tuple[float, float], ...], ...] | None = _key(
+    obstacles: tuple[tuple[tuple[float, float], ...], ...] | None = keyfield(
         "polygons", "solid islands inside the outline, polygons of [x, y], m", (),
         only=_POLYGON)
-    constriction_x: float | None = _key("float", "where escape is measured from, m "
+    constriction_x: float | None = keyfield("float", "where escape is measured from, m "
                                         "(None: x of the narrowest section, resolved "
                                         "by the run)", only=_POLYGON)
 
@@ -217,140 +217,140 @@ _ROUND, _SQUARE, _RECT, _REGULAR = (("circle", "regular_polygon"), ("square",),
                                     ("rectangle",), ("regular_polygon",))
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class SpeciesConfig(_Config):
+class SpeciesConfig(Config):
     """One ``[[particles]]`` table; keys of the other shapes are ``None``."""
 
-    name: str = _key("str", 'label (default "species<k>")')
-    shape: str = _key("choice", "particle outline", required=True,
+    name: str = keyfield("str", 'label (default "species<k>")')
+    shape: str = keyfield("choice", "particle outline", required=True,
                       choices=("circle", "square", "rectangle", "regular_polygon",
                                "polygon"))
-    diameter: float | None = _key("float", "circle diameter, or circumscribed diameter "
+    diameter: float | None = keyfield("float", "circle diameter, or circumscribed diameter "
                                   "of a regular polygon, m", required=True, gt=0,
                                   only=_ROUND)
-    side: float | None = _key("float", "square side, m", required=True, gt=0,
+    side: float | None = keyfield("float", "square side, m", required=True, gt=0,
                               only=_SQUARE)
-    width: float | None = _key("float", "rectangle width, m", required=True, gt=0,
+    width: float | None = keyfield("float", "rectangle width, m", required=True, gt=0,
                                only=_RECT)
-    height: float | None = _key("float", "rectangle height, m", required=True, gt=0,
+    height: float | None = keyfield("float", "rectangle height, m", required=True, gt=0,
                                 only=_RECT)
-    n_vertices: int | None = _key("int", "vertices of a regular polygon", required=True,
+    n_vertices: int | None = keyfield("int", "vertices of a regular polygon", required=True,
                                   ge=3, only=_REGULAR)
-    vertices: tuple[tuple[float, float], ...] | None = _key(
+    vertices: tuple[tuple[float, float], ...] | None = keyfield(
         "points", "body-frame outline [x, y] (recentred on its centroid by the run), m",
         required=True, min_len=3, only=("polygon",))
-    count: int | None = _key("int", "particles in the control volume (or "
+    count: int | None = keyfield("int", "particles in the control volume (or "
                              "packing_fraction, or positions)", ge=0)
-    positions: tuple[tuple[float, float, float], ...] | None = _key(
+    positions: tuple[tuple[float, float, float], ...] | None = keyfield(
         "poses", "initial [x, y] or [x, y, theta] of every particle of this species "
         "(m, m, rad; theta 0 if left out), instead of a random placement; the same in "
         "every realization, checked against the walls and each other", min_len=1)
-    packing_fraction: float | None = _key("float", "areal fraction in the control "
+    packing_fraction: float | None = keyfield("float", "areal fraction in the control "
                                           "volume (or count), dimensionless", gt=0,
                                           lt=MAX_PACKING_FRACTION)
-    density: float = _key("float", "kg/m^3", required=True, gt=0)
-    kn: float | str = _key("float", 'normal stiffness of the prism, N/m; "auto": '
+    density: float = keyfield("float", "kg/m^3", required=True, gt=0)
+    kn: float | str = keyfield("float", 'normal stiffness of the prism, N/m; "auto": '
                            "largest driving force / (overlap_target d_eq)", AUTO,
                            auto=True, gt=0)
-    ks: float | str = _key("float", 'tangential stiffness, N/m; "auto": kn / 2', AUTO,
+    ks: float | str = keyfield("float", 'tangential stiffness, N/m; "auto": kn / 2', AUTO,
                            auto=True, ge=0)
-    friction: float = _key("float", "Coulomb coefficient mu, dimensionless", 0.25,
+    friction: float = keyfield("float", "Coulomb coefficient mu, dimensionless", 0.25,
                            ge=0)
-    restitution: float = _key("float", "coefficient of restitution e, dimensionless",
+    restitution: float = keyfield("float", "coefficient of restitution e, dimensionless",
                               0.5, gt=0, le=1)
-    nodes: int = _key("int", "surface nodes (at least the shape's vertices)", 40, ge=3)
-    ls_spacing: float | str = _key("float", 'level-set grid spacing, m; "auto": d_eq '
+    nodes: int = keyfield("int", "surface nodes (at least the shape's vertices)", 40, ge=3)
+    ls_spacing: float | str = keyfield("float", 'level-set grid spacing, m; "auto": d_eq '
                                    "/ 40", AUTO, auto=True, gt=0)
-    xi: float | None = _key("float", "global damping of this species, 1/s; unset: "
+    xi: float | None = keyfield("float", "global damping of this species, 1/s; unset: "
                             "damping.xi (the resolved scene records each species' value)",
                             None, ge=0)
 
     def area(self) -> float:
         """Area of the shape, m^2."""
-        return _shape_area(self.shape, dataclasses.asdict(self))
+        return shape_area(self.shape, dataclasses.asdict(self))
 
     def d_eq(self) -> float:
         """Equivalent diameter ``sqrt(4 A / pi)``, m."""
         return math.sqrt(4.0 * self.area() / math.pi)
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class ContactConfig(_Config):
+class ContactConfig(Config):
     """``[contact]``: contact law options."""
 
-    normalize_by_nodes: bool = _key("bool", "divide a contact's resultant by its "
+    normalize_by_nodes: bool = keyfield("bool", "divide a contact's resultant by its "
                                     "number of nodes in contact (the paper)", True)
-    overlap_target: float = _key("float", 'overlap kn = "auto" aims at, fraction of '
+    overlap_target: float = keyfield("float", 'overlap kn = "auto" aims at, fraction of '
                                  "d_eq", 0.02, gt=0, le=0.2)
-    overlap_limit: float = _key("float", "deepest overlap before a realization is "
+    overlap_limit: float = keyfield("float", "deepest overlap before a realization is "
                                 "stopped as unstable, fraction of d_eq", 0.25, gt=0,
                                 lt=1)
-    disk_fast_path: bool = _key("bool", "use analytic disk contacts when every particle "
+    disk_fast_path: bool = keyfield("bool", "use analytic disk contacts when every particle "
                                 "is a circle (false: level sets for disks too)", True)
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class DampingConfig(_Config):
+class DampingConfig(Config):
     """``[damping]``: global (plate drag) damping."""
 
-    xi: float | str = _key("float", 'global damping, 1/s; "auto": the plate drag',
+    xi: float | str = keyfield("float", 'global damping, 1/s; "auto": the plate drag',
                            AUTO, auto=True, ge=0)
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class FeedConfig(_Config):
+class FeedConfig(Config):
     """``[feed]``: where particles start and re-enter."""
 
-    mode: str = _key("choice", "keep the particle count, or let the domain empty",
+    mode: str = keyfield("choice", "keep the particle count, or let the domain empty",
                      "count", choices=("count", "none"))
-    region: tuple[float, float] | None = _key("interval", "control volume [x0, x1], m "
+    region: tuple[float, float] | None = keyfield("interval", "control volume [x0, x1], m "
                                               "(None: upstream straight section, "
                                               "resolved by the run)")
-    inlet: tuple[float, float] | None = _key("interval", "re-entry strip [x0, x1], m "
+    inlet: tuple[float, float] | None = keyfield("interval", "re-entry strip [x0, x1], m "
                                              "(None: first 2 max d_eq of region, "
                                              "resolved by the run)")
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class ClogConfig(_Config):
+class ClogConfig(Config):
     """``[clog]``: the clog criterion."""
 
-    window: float = _key("float", "time without escape that signals a clog, s "
+    window: float = keyfield("float", "time without escape that signals a clog, s "
                          "(default 0.1 t_end)", gt=0)
-    speed_fraction: float = _key("float", "speed threshold near the constriction, "
+    speed_fraction: float = keyfield("float", "speed threshold near the constriction, "
                                  "fraction of the mean fluid speed", 0.02, gt=0, lt=1)
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class OutputConfig(_Config):
+class OutputConfig(Config):
     """``[output]``: files written by a run."""
 
-    dir: str = _key("str", 'output folder (default "runs/<name>")')
-    video: bool = _key("bool", "write video.mp4", False)
-    video_realization: int = _key("int", "which realization the video shows, < "
+    dir: str = keyfield("str", 'output folder (default "runs/<name>")')
+    video: bool = keyfield("bool", "write video.mp4", False)
+    video_realization: int = keyfield("int", "which realization the video shows, < "
                                   "run.realizations", 0, ge=0)
-    fps: int = _key("int", "video frame rate, 1/s", 30, ge=1)
-    frames: int = _key("int", "frames over t_end (frame 0 is the initial state)", 150,
+    fps: int = keyfield("int", "video frame rate, 1/s", 30, ge=1)
+    frames: int = keyfield("int", "frames over t_end (frame 0 is the initial state)", 150,
                        ge=2)
-    width: int = _key("int", "video width, pixels, even", 960, ge=64)
-    series_interval: float = _key("float", "time between rows of escapees.csv, s "
+    width: int = keyfield("int", "video width, pixels, even", 960, ge=64)
+    series_interval: float = keyfield("float", "time between rows of escapees.csv, s "
                                   "(default t_end / 200)", gt=0)
 
 
-_SECTIONS = {"run": RunConfig, "fluid": FluidConfig, "geometry": GeometryConfig,
+SECTIONS = {"run": RunConfig, "fluid": FluidConfig, "geometry": GeometryConfig,
              "contact": ContactConfig, "damping": DampingConfig, "feed": FeedConfig,
              "clog": ClogConfig, "output": OutputConfig}
 
 
 # ----------------------------------------------------------------- shape geometry
 
-def _shape_area(shape: str, keys: Mapping[str, Any]) -> float:
+def shape_area(shape: str, keys: Mapping[str, Any]) -> float:
     if shape == "circle":
         return math.pi * keys["diameter"] ** 2 / 4.0
     if shape == "square":
@@ -363,7 +363,7 @@ def _shape_area(shape: str, keys: Mapping[str, Any]) -> float:
     return abs(signed_area(keys["vertices"]))
 
 
-def _shape_vertex_count(shape: str, keys: Mapping[str, Any]) -> int:
+def shape_vertex_count(shape: str, keys: Mapping[str, Any]) -> int:
     fixed = {"circle": 0, "square": 4, "rectangle": 4}
     if shape in fixed:
         return fixed[shape]

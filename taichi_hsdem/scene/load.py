@@ -31,10 +31,7 @@ Examples
 from __future__ import annotations
 
 import copy
-import dataclasses
-import difflib
 import math
-import numbers
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,27 +40,54 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from ..geometry.polygon import cross, points_in_polygon, segments_intersect, signed_area
-from .keys import (_SECTIONS, AUTO, MAX_PACKING_FRACTION, MIN_GAP_OVER_DEQ, ClogConfig,
-                   ContactConfig, DampingConfig, FeedConfig, FluidConfig, GeometryConfig,
-                   OutputConfig, RunConfig, SceneError, SpeciesConfig, _Config, _document,
-                   _key, _shape_area, _shape_vertex_count, _Spec, _specs)
-from .toml import parse_override_value, read_toml, toml_value
+from .coerce import (
+    MISSING,
+    Problems,
+    describe,
+    good,
+    read_table,
+    show,
+    suggest,
+    unknown_key_message,
+)
+from .keys import (
+    MAX_PACKING_FRACTION,
+    MIN_GAP_OVER_DEQ,
+    SECTIONS,
+    ClogConfig,
+    Config,
+    ContactConfig,
+    DampingConfig,
+    FeedConfig,
+    FluidConfig,
+    GeometryConfig,
+    OutputConfig,
+    RunConfig,
+    SceneError,
+    SpeciesConfig,
+    document,
+    key_specs,
+    keyfield,
+    shape_area,
+    shape_vertex_count,
+)
+from .toml import parse_override_value, read_toml
 
 __all__ = ["Scene", "load_scene"]
 
 
-@_document
+@document
 @dataclass(frozen=True)
-class Scene(_Config):
+class Scene(Config):
     """A validated scene; build it with `load_scene`.
 
     ``particles`` holds one `SpeciesConfig` per ``[[particles]]`` table and
     ``source`` the file it was read from (``"<dict>"`` for a dict).
     """
 
-    name: str = _key("str", "names the default output folder (default: file stem)")
-    description: str = _key("str", "free text", "")
-    units: str = _key("choice", 'how numbers are read: SI, or "dimensionless" (same '
+    name: str = keyfield("str", "names the default output folder (default: file stem)")
+    description: str = keyfield("str", "free text", "")
+    units: str = keyfield("choice", 'how numbers are read: SI, or "dimensionless" (same '
                       "formulas, numbers as given)", "SI",
                       choices=("SI", "dimensionless"))
     run: RunConfig = field(default_factory=RunConfig)
@@ -80,7 +104,7 @@ class Scene(_Config):
     def to_dict(self) -> dict[str, Any]:
         """The scene as plain nested dicts and lists (no ``source``, no ``None``)."""
         out = super().to_dict()
-        for section in _SECTIONS:
+        for section in SECTIONS:
             out[section] = getattr(self, section).to_dict()
         out["particles"] = [species.to_dict() for species in self.particles]
         return {key: out[key] for key in _TOP_ORDER}
@@ -142,274 +166,10 @@ def _polygon_problem(points) -> str | None:
 
 # ------------------------------------------------------------------- type checks
 
-_BAD = object()  # a value already reported as invalid
-_MISSING = object()  # a key the table does not give
-
-
-class _Problems:
-    """Collects ``"ORIGIN: key: problem"`` lines; ORIGIN is the file or an override."""
-
-    def __init__(self, label: str, origins: Mapping[str, str]):
-        self.label, self.origins, self.lines = label, origins, []
-
-    def add(self, key: str, message: str) -> None:
-        origin, probe = self.label, key
-        while probe:
-            if probe in self.origins:
-                origin = self.origins[probe]
-                break
-            probe = probe[:max(probe.rfind("."), probe.rfind("["), 0)]
-        line = f"{origin}: {key}: {message}" if key else f"{origin}: {message}"
-        if line not in self.lines:
-            self.lines.append(line)
-
-
-def _show(value: Any, limit: int = 60) -> str:
-    try:
-        text = toml_value(value)
-    except Exception:  # a value TOML cannot spell (e.g. a lone surrogate)
-        text = repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
-def _describe(value: Any) -> str:
-    if value is None:
-        return "None"
-    if isinstance(value, bool):
-        kind = "boolean"
-    elif isinstance(value, numbers.Integral):
-        kind = "integer"
-    elif isinstance(value, numbers.Real):
-        kind = "number"
-    elif isinstance(value, str):
-        kind = "string"
-    elif isinstance(value, (list, tuple)):
-        kind = "array"
-    elif isinstance(value, Mapping):
-        return "a table"
-    else:
-        kind = type(value).__name__.replace("datetime", "date-time")
-    return f"{kind} {_show(value)}"
-
-
-def _num(x: float) -> str:
-    return repr(int(x)) if float(x).is_integer() and abs(x) < 1e15 else repr(x)
-
-
-def _range_text(spec: _Spec) -> str:
-    low = (("(", spec.gt) if spec.gt is not None
-           else ("[", spec.ge) if spec.ge is not None else None)
-    high = ((")", spec.lt) if spec.lt is not None
-            else ("]", spec.le) if spec.le is not None else None)
-    if low and high:
-        return f"in {low[0]}{_num(low[1])}, {_num(high[1])}{high[0]}"
-    if low:
-        return f"{'>' if low[0] == '(' else '>='} {_num(low[1])}"
-    if high:
-        return f"{'<' if high[0] == ')' else '<='} {_num(high[1])}"
-    return ""
-
-
-def _in_range(x: float, spec: _Spec) -> bool:
-    return ((spec.gt is None or x > spec.gt) and (spec.ge is None or x >= spec.ge)
-            and (spec.lt is None or x < spec.lt) and (spec.le is None or x <= spec.le))
-
-
-def _suggest(word: str, candidates: Iterable[str]) -> str:
-    match = difflib.get_close_matches(word, list(candidates), n=1, cutoff=0.6)
-    return f" (did you mean {match[0]!r}?)" if match else ""
-
-
-def _is_real(value: Any) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
-
-
-def _expected(spec: _Spec) -> str:
-    what = {"float": "a number", "int": "an integer", "bool": "true or false",
-            "str": "a string", "choice": "one of " + ", ".join(map(repr, spec.choices)),
-            "points": "an array of [x, y] pairs", "polygons": "an array of polygons",
-            "poses": "an array of [x, y] or [x, y, theta]",
-            "interval": "[x0, x1]"}[spec.kind]
-    limits = _range_text(spec)
-    if limits:
-        what += " " + limits
-    return what + (' or "auto"' if spec.auto else "")
-
-
-def _coerce_point(value: Any, key: str, out: _Problems):
-    if (isinstance(value, (list, tuple)) and len(value) == 2
-            and all(_is_real(c) and math.isfinite(c) for c in value)):
-        return (float(value[0]), float(value[1]))
-    out.add(key, f"expected [x, y] with two finite numbers, got {_describe(value)}")
-    return _BAD
-
-
-def _coerce_pose(value: Any, key: str, out: _Problems):
-    if (isinstance(value, (list, tuple)) and len(value) in (2, 3)
-            and all(_is_real(c) and math.isfinite(c) for c in value)):
-        return (float(value[0]), float(value[1]),
-                float(value[2]) if len(value) == 3 else 0.0)
-    out.add(key, f"expected [x, y] or [x, y, theta] with finite numbers, got {_describe(value)}")
-    return _BAD
-
-
-def _coerce_array(value: Any, key: str, out: _Problems, item, what: str,
-                  min_len: int = 0, unit: str = "entries"):
-    """A tuple of ``item(entry, "key[i]", out)`` for an array ``value`` of at least
-    ``min_len`` entries, or _BAD after reporting why not."""
-    if not isinstance(value, (list, tuple)):
-        out.add(key, f"expected an array of {what}, got {_describe(value)}")
-        return _BAD
-    items = tuple(item(p, f"{key}[{i}]", out) for i, p in enumerate(value))
-    if _BAD in items:
-        return _BAD
-    if len(items) < min_len:
-        out.add(key, f"needs at least {min_len} {unit}, got {len(items)}")
-        return _BAD
-    return items
-
-
-def _coerce_points(value: Any, key: str, min_len: int, out: _Problems):
-    return _coerce_array(value, key, out, _coerce_point, "[x, y] pairs", min_len, "vertices")
-
-
-def _coerce(value: Any, spec: _Spec, key: str, out: _Problems) -> Any:
-    """``value`` converted to the key's type, or _BAD after reporting why not."""
-    if spec.auto and value == AUTO:
-        return AUTO
-    kind = spec.kind
-    if kind in ("float", "int"):
-        if not (_is_int(value) if kind == "int" else _is_real(value)):
-            hint = ""
-            if isinstance(value, str):
-                hint = _suggest(value, [AUTO]) if spec.auto else ""
-            out.add(key, f"expected {_expected(spec)}, got {_describe(value)}{hint}")
-            return _BAD
-        try:
-            number = int(value) if kind == "int" else float(value)
-        except OverflowError:
-            number = math.inf
-        if not math.isfinite(number):
-            out.add(key, f"expected a finite number, got {_show(number)}")
-            return _BAD
-        if not _in_range(number, spec):
-            out.add(key, f"must be {_range_text(spec)}, got {_show(number)}")
-            return _BAD
-        return number
-    if kind == "bool":
-        if isinstance(value, bool):
-            return value
-        out.add(key, f"expected true or false, got {_describe(value)}")
-        return _BAD
-    if kind in ("str", "choice"):
-        if not isinstance(value, str):
-            out.add(key, f"expected {_expected(spec)}, got {_describe(value)}")
-            return _BAD
-        try:
-            value.encode("utf-8")
-        except UnicodeEncodeError:
-            out.add(key, f"not valid Unicode text: {value!r}")
-            return _BAD
-        if kind == "choice" and value not in spec.choices:
-            out.add(key, f"must be one of {', '.join(map(repr, spec.choices))}, got "
-                         f"{_show(value)}{_suggest(value, spec.choices)}")
-            return _BAD
-        return value
-    if kind == "points":
-        return _coerce_points(value, key, spec.min_len, out)
-    if kind == "poses":
-        return _coerce_array(value, key, out, _coerce_pose, "[x, y] or [x, y, theta]",
-                             spec.min_len)
-    if kind == "polygons":
-        return _coerce_array(value, key, out,
-                             lambda p, where, o: _coerce_points(p, where, 3, o), "polygons")
-    # interval
-    if (isinstance(value, (list, tuple)) and len(value) == 2
-            and all(_is_real(c) and math.isfinite(c) for c in value)):
-        if value[0] < value[1]:
-            return (float(value[0]), float(value[1]))
-        out.add(key, f"expected [x0, x1] with x0 < x1, got {_show(value)}")
-        return _BAD
-    out.add(key, f"expected [x0, x1] with two finite numbers, got {_describe(value)}")
-    return _BAD
-
-
-def _read_table(cls, raw: Any, where: str, out: _Problems,
-                discriminator: str | None = None) -> dict[str, Any]:
-    """Type-check one table against ``cls``'s keys.
-
-    Returns every key's value: converted, the static default, ``None`` (optional and
-    absent, or not used by the discriminator's value) or _BAD (already reported).
-    """
-    specs = _specs(cls)
-    prefix = f"{where}." if where else ""
-    if raw is _MISSING:
-        raw = {}
-    if not isinstance(raw, Mapping):
-        header = "[[particles]]" if where.startswith("particles") else f"[{where}]"
-        out.add(where, f"expected a table {header}, got {_describe(raw)}")
-        return dict.fromkeys(specs, _BAD)
-    for key in raw:
-        if str(key) not in specs:
-            out.add(prefix + str(key), _unknown_key_message(str(key), specs, where))
-    chosen = None
-    if discriminator:
-        chosen = (_coerce(raw[discriminator], specs[discriminator],
-                          prefix + discriminator, out) if discriminator in raw
-                  else _MISSING)
-    defaults = {f.name: f.default for f in dataclasses.fields(cls)}
-    values: dict[str, Any] = {}
-    for name, spec in specs.items():
-        key = prefix + name
-        if name == discriminator:
-            values[name] = chosen
-        elif spec.only and not (isinstance(chosen, str) and chosen in spec.only):
-            # A key of another kind / shape, or the discriminator is missing or bad
-            # (reported already): nothing to check.
-            if isinstance(chosen, str) and name in raw:
-                out.add(key, f"not used by {discriminator} {chosen!r}")
-            values[name] = _BAD if name in raw else None
-            continue
-        else:
-            values[name] = (_coerce(raw[name], spec, key, out) if name in raw
-                            else _MISSING)
-        if values[name] is _MISSING:
-            if spec.required:
-                needed = f" for {discriminator} {chosen!r}" if spec.only else ""
-                out.add(key, f"missing: required{needed}")
-                values[name] = _BAD
-            else:
-                values[name] = defaults[name]
-    return values
-
-
-def _unknown_key_message(key: str, known: Iterable[str], where: str) -> str:
-    """Says ``key`` is unknown in table ``where`` ("" for the top level), suggesting
-    the closest known key, or else the tables where such a key belongs."""
-    suggestion = _suggest(key, known)
-    if suggestion:
-        return ("unknown key" if where else "unknown section or key") + suggestion
-    homes = [f"[{name}]" for name, cls in _SECTIONS.items()
-             if name != where and key in _specs(cls)]
-    if key in _specs(SpeciesConfig) and not where.startswith("particles"):
-        homes.append("[[particles]]")
-    if not where:
-        message = "unknown section or key"
-        return message + (f"; it belongs in {' or '.join(homes)}" if homes else "")
-    return "unknown key" + (f" here; it belongs in {' or '.join(homes)}" if homes else "")
-
-
-def _good(*values: Any) -> bool:
-    return all(v is not None and v is not _BAD and v != AUTO for v in values)
-
 
 # --------------------------------------------------------------- cross-key checks
 
-def _check_fluid(v: dict, out: _Problems) -> None:
+def _check_fluid(v: dict, out: Problems) -> None:
     if v["enabled"] is not True:
         return
     if v["viscosity"] is None:
@@ -417,52 +177,52 @@ def _check_fluid(v: dict, out: _Problems) -> None:
     if v["bc"] == "pressure":
         if v["p_in"] is None:
             out.add("fluid.p_in", 'missing: required for fluid.bc = "pressure"')
-        elif _good(v["p_in"], v["p_out"]) and v["p_in"] <= v["p_out"]:
-            out.add("fluid.p_in", f"must exceed fluid.p_out ({_show(v['p_out'])}) so "
+        elif good(v["p_in"], v["p_out"]) and v["p_in"] <= v["p_out"]:
+            out.add("fluid.p_in", f"must exceed fluid.p_out ({show(v['p_out'])}) so "
                                   f"the fluid flows from inlet to outlet, got "
-                                  f"{_show(v['p_in'])}")
+                                  f"{show(v['p_in'])}")
     if v["bc"] == "flow_rate" and v["flow_rate"] is None:
         out.add("fluid.flow_rate", 'missing: required for fluid.bc = "flow_rate"')
 
 
-def _check_geometry(v: dict, out: _Problems) -> None:
+def _check_geometry(v: dict, out: Problems) -> None:
     kind = v["kind"]
     if kind == "hourglass":
-        if v["neck_x"] is None and _good(v["length"]):
+        if v["neck_x"] is None and good(v["length"]):
             v["neck_x"] = v["length"] / 2.0
-        if v["taper_length"] is None and _good(v["width"]):
+        if v["taper_length"] is None and good(v["width"]):
             v["taper_length"] = v["width"]
-        if _good(v["neck_width"], v["width"]) and v["neck_width"] >= v["width"]:
+        if good(v["neck_width"], v["width"]) and v["neck_width"] >= v["width"]:
             out.add("geometry.neck_width", f"must be < geometry.width "
-                    f"({_show(v['width'])}), got {_show(v['neck_width'])}")
-        if _good(v["neck_x"], v["length"]):
+                    f"({show(v['width'])}), got {show(v['neck_width'])}")
+        if good(v["neck_x"], v["length"]):
             if not 0.0 < v["neck_x"] < v["length"]:
                 out.add("geometry.neck_x", f"must lie inside the channel, in (0, "
-                        f"{_show(v['length'])}), got {_show(v['neck_x'])}")
-            elif _good(v["taper_length"]) and not (
+                        f"{show(v['length'])}), got {show(v['neck_x'])}")
+            elif good(v["taper_length"]) and not (
                     v["taper_length"] <= v["neck_x"] <= v["length"] - v["taper_length"]):
                 out.add("geometry.taper_length",
-                        f"the tapers span [{_show(v['neck_x'] - v['taper_length'])}, "
-                        f"{_show(v['neck_x'] + v['taper_length'])}] around neck_x, past "
-                        f"the channel [0, {_show(v['length'])}]; shorten taper_length "
+                        f"the tapers span [{show(v['neck_x'] - v['taper_length'])}, "
+                        f"{show(v['neck_x'] + v['taper_length'])}] around neck_x, past "
+                        f"the channel [0, {show(v['length'])}]; shorten taper_length "
                         "or move neck_x")
     elif kind == "converging":
-        if v["width_out"] is None and _good(v["width_in"]):
+        if v["width_out"] is None and good(v["width_in"]):
             v["width_out"] = v["width_in"]
         width, inlet, outlet = v["constriction_width"], v["width_in"], v["width_out"]
-        if _good(width, inlet) and width >= inlet:
+        if good(width, inlet) and width >= inlet:
             out.add("geometry.constriction_width", f"must be < geometry.width_in "
-                    f"({_show(inlet)}), got {_show(width)}")
-        if _good(width, outlet) and outlet < width:
+                    f"({show(inlet)}), got {show(width)}")
+        if good(width, outlet) and outlet < width:
             out.add("geometry.width_out", f"must be >= geometry.constriction_width "
-                    f"({_show(width)}), got {_show(outlet)}")
+                    f"({show(width)}), got {show(outlet)}")
     elif kind == "polygon":
         _check_polygon_outline(v, out)
 
 
-def _check_polygon_outline(v: dict, out: _Problems) -> None:
+def _check_polygon_outline(v: dict, out: Problems) -> None:
     outline = v["outline"]
-    if not _good(outline):
+    if not good(outline):
         return
     problem = _polygon_problem(outline)
     if problem:
@@ -473,12 +233,12 @@ def _check_polygon_outline(v: dict, out: _Problems) -> None:
     n = len(outline)
     for side, x, end in (("inlet", x_min, "least"), ("outlet", x_max, "greatest")):
         if not any(outline[i][0] == x == outline[(i + 1) % n][0] for i in range(n)):
-            out.add("geometry.outline", f"has no edge on x = {_show(x)}: the {side} is "
+            out.add("geometry.outline", f"has no edge on x = {show(x)}: the {side} is "
                     f"the outline's vertical edge at its {end} x")
-    if _good(v["constriction_x"]) and not x_min < v["constriction_x"] < x_max:
+    if good(v["constriction_x"]) and not x_min < v["constriction_x"] < x_max:
         out.add("geometry.constriction_x", f"must lie inside the outline, in "
-                f"({_show(x_min)}, {_show(x_max)}), got {_show(v['constriction_x'])}")
-    if not _good(v["obstacles"]):
+                f"({show(x_min)}, {show(x_max)}), got {show(v['constriction_x'])}")
+    if not good(v["obstacles"]):
         return
     edges = [(outline[i], outline[(i + 1) % n]) for i in range(n)]
     for k, obstacle in enumerate(v["obstacles"]):
@@ -492,13 +252,13 @@ def _check_polygon_outline(v: dict, out: _Problems) -> None:
             out.add(key, "must lie strictly inside geometry.outline")
 
 
-def _check_species(v: dict, index: int, out: _Problems) -> tuple[float, int] | None:
+def _check_species(v: dict, index: int, out: Problems) -> tuple[float, int] | None:
     """Fill the name, check count / packing_fraction and the shape; return
     (area, vertex count) when the shape is valid."""
     where = f"particles[{index}]"
     if v["name"] is None:
         v["name"] = f"species{index}"
-    if _good(v["positions"]):
+    if good(v["positions"]):
         n = len(v["positions"])
         if v["packing_fraction"] is not None:
             out.add(f"{where}.packing_fraction", "positions are given too: give one of "
@@ -514,117 +274,117 @@ def _check_species(v: dict, index: int, out: _Problems) -> tuple[float, int] | N
         out.add(f"{where}.packing_fraction", "count is given too: give exactly one of "
                                              "count and packing_fraction")
     shape = v["shape"]
-    if not _good(shape) or not all(_good(v[name]) for name, spec in
-                                   _specs(SpeciesConfig).items() if shape in spec.only):
+    if not good(shape) or not all(good(v[name]) for name, spec in
+                                   key_specs(SpeciesConfig).items() if shape in spec.only):
         return None
     if shape == "polygon":
         problem = _polygon_problem(v["vertices"])
         if problem:
             out.add(f"{where}.vertices", problem)
             return None
-    vertices = _shape_vertex_count(shape, v)
-    if _good(v["nodes"]) and v["nodes"] < vertices:
+    vertices = shape_vertex_count(shape, v)
+    if good(v["nodes"]) and v["nodes"] < vertices:
         out.add(f"{where}.nodes", f"must be at least the {vertices} vertices of the "
                                   f"{shape.replace('_', ' ')}, got {v['nodes']}")
-    return _shape_area(shape, v), vertices
+    return shape_area(shape, v), vertices
 
 
 def _check_scene(scene: dict, species: dict[int, dict], shapes: dict[int, Any],
-                 stem: str, out: _Problems) -> None:
+                 stem: str, out: Problems) -> None:
     """Checks and defaults that span sections; ``species`` and ``shapes`` are keyed
     by the species' index."""
     run, fluid, output, clog = (scene[k] for k in ("run", "fluid", "output", "clog"))
     if scene["name"] is None:
         scene["name"] = stem
     name = scene["name"]
-    if _good(name) and (name.strip() in ("", ".", "..")
+    if good(name) and (name.strip() in ("", ".", "..")
                         or any(c in name for c in "/\\\0")):
         out.add("name", f"must be a non-empty folder name without / or \\, got "
-                        f"{_show(name)}")
-    if output["dir"] is None and _good(name):
+                        f"{show(name)}")
+    if output["dir"] is None and good(name):
         output["dir"] = f"runs/{name}"
-    if _good(output["dir"]) and (not output["dir"].strip() or "\0" in output["dir"]):
-        out.add("output.dir", f"must be a folder path, got {_show(output['dir'])}")
-    if _good(run["t_end"]):
+    if good(output["dir"]) and (not output["dir"].strip() or "\0" in output["dir"]):
+        out.add("output.dir", f"must be a folder path, got {show(output['dir'])}")
+    if good(run["t_end"]):
         if clog["window"] is None:
             clog["window"] = 0.1 * run["t_end"]
         if output["series_interval"] is None:
             output["series_interval"] = run["t_end"] / 200.0
-    if _good(output["width"]) and output["width"] % 2:
+    if good(output["width"]) and output["width"] % 2:
         out.add("output.width", f"must be even (H.264 with yuv420p), got "
                                 f"{output['width']}")
-    if (_good(output["video_realization"], run["realizations"])
+    if (good(output["video_realization"], run["realizations"])
             and output["video_realization"] >= run["realizations"]):
         out.add("output.video_realization",
                 f"must be < run.realizations ({run['realizations']}), got "
                 f"{output['video_realization']}")
     contact = scene["contact"]
-    if (_good(contact["overlap_target"], contact["overlap_limit"])
+    if (good(contact["overlap_target"], contact["overlap_limit"])
             and contact["overlap_limit"] <= contact["overlap_target"]):
         out.add("contact.overlap_limit", f"must exceed contact.overlap_target "
-                f"({_show(contact['overlap_target'])}), got "
-                f"{_show(contact['overlap_limit'])}")
+                f"({show(contact['overlap_target'])}), got "
+                f"{show(contact['overlap_limit'])}")
 
     fractions = [s["packing_fraction"] for s in species.values()
-                 if _good(s["packing_fraction"])]
+                 if good(s["packing_fraction"])]
     if len(fractions) > 1 and sum(fractions) >= MAX_PACKING_FRACTION:
         out.add("particles", f"the packing fractions sum to {sum(fractions):.6g}; "
                              f"it must be < {MAX_PACKING_FRACTION}")
     seen: dict[str, int] = {}
     for k, s in species.items():
-        if _good(s["name"]):
+        if good(s["name"]):
             if s["name"] in seen:
-                out.add(f"particles[{k}].name", f"{_show(s['name'])} already names "
+                out.add(f"particles[{k}].name", f"{show(s['name'])} already names "
                                                 f"particles[{seen[s['name']]}]")
             seen.setdefault(s["name"], k)
     gap = fluid["gap"]
     for k, shape in shapes.items():
-        if shape is None or not _good(gap):
+        if shape is None or not good(gap):
             continue
         d_eq = math.sqrt(4.0 * shape[0] / math.pi)
         if gap <= MIN_GAP_OVER_DEQ * d_eq:
             out.add("fluid.gap", f"must be > (2/3) d_eq = {MIN_GAP_OVER_DEQ * d_eq:.6g} "
                     f"of particles[{k}] ({species[k]['name']!s}, d_eq = {d_eq:.6g}) "
-                    f"for the Kozeny-Carman porosity inside it, got {_show(gap)}")
+                    f"for the Kozeny-Carman porosity inside it, got {show(gap)}")
 
 
 def _build_scene(raw: Any, label: str, stem: str, origins: Mapping[str, str]) -> Scene:
-    out = _Problems(label, origins)
+    out = Problems(label, origins)
     if not isinstance(raw, Mapping):
-        raise SceneError(f"{label}: expected a table of sections, got {_describe(raw)}")
-    known = set(_specs(Scene)) | set(_SECTIONS) | {"particles"}
+        raise SceneError(f"{label}: expected a table of sections, got {describe(raw)}")
+    known = set(key_specs(Scene)) | set(SECTIONS) | {"particles"}
     for key in raw:
         if str(key) not in known:
-            out.add(str(key), _unknown_key_message(str(key), known, ""))
-    scene = _read_table(Scene, {k: v for k, v in raw.items() if k in _specs(Scene)},
+            out.add(str(key), unknown_key_message(str(key), known, ""))
+    scene = read_table(Scene, {k: v for k, v in raw.items() if k in key_specs(Scene)},
                         "", out)
-    for section, cls in _SECTIONS.items():
+    for section, cls in SECTIONS.items():
         discriminator = "kind" if cls is GeometryConfig else None
-        scene[section] = _read_table(cls, raw.get(section, _MISSING), section, out,
+        scene[section] = read_table(cls, raw.get(section, MISSING), section, out,
                                      discriminator)
     _check_fluid(scene["fluid"], out)
     _check_geometry(scene["geometry"], out)
 
-    raw_species = raw.get("particles", _MISSING)
+    raw_species = raw.get("particles", MISSING)
     species: dict[int, dict] = {}
     shapes: dict[int, Any] = {}
-    if raw_species is _MISSING or (isinstance(raw_species, (list, tuple))
+    if raw_species is MISSING or (isinstance(raw_species, (list, tuple))
                                    and not raw_species):
         out.add("particles", "missing: add at least one [[particles]] table")
     elif not isinstance(raw_species, (list, tuple)):
         out.add("particles", f"expected an array of tables [[particles]], got "
-                             f"{_describe(raw_species)}")
+                             f"{describe(raw_species)}")
     else:
         for k, table in enumerate(raw_species):
-            values = _read_table(SpeciesConfig, table, f"particles[{k}]", out, "shape")
+            values = read_table(SpeciesConfig, table, f"particles[{k}]", out, "shape")
             if isinstance(table, Mapping):
                 species[k] = values
                 shapes[k] = _check_species(values, k, out)
     _check_scene(scene, species, shapes, stem, out)
     if out.lines:
         raise SceneError(out.lines)
-    sections = {name: cls(**scene[name]) for name, cls in _SECTIONS.items()}
-    return Scene(**{name: scene[name] for name in _specs(Scene)}, **sections,
+    sections = {name: cls(**scene[name]) for name, cls in SECTIONS.items()}
+    return Scene(**{name: scene[name] for name in key_specs(Scene)}, **sections,
                  particles=tuple(SpeciesConfig(**s) for s in species.values()), source=label)
 
 
@@ -653,9 +413,9 @@ def _set_path(raw: dict, path: str, value: Any, origin: str,
         else:
             return fail("expected particles.key or particles.K.key with K a species "
                         "index")
-        specs = _specs(SpeciesConfig)
+        specs = key_specs(SpeciesConfig)
         if key not in specs:
-            return fail("unknown key" + _suggest(key, specs))
+            return fail("unknown key" + suggest(key, specs))
         if not isinstance(species, list) or not species:
             return fail("the scene has no [[particles]] table to set it on")
         for k in indices:
@@ -666,24 +426,24 @@ def _set_path(raw: dict, path: str, value: Any, origin: str,
                 _assign(species[k], key, value)
                 origins[f"particles[{k}].{key}"] = origin
         return None
-    if head in _SECTIONS:
+    if head in SECTIONS:
         if len(parts) != 2:
             return fail(f"expected {head}.key" if len(parts) == 1 else "unknown key")
-        specs = _specs(_SECTIONS[head])
+        specs = key_specs(SECTIONS[head])
         if parts[1] not in specs:
-            return fail("unknown key" + _suggest(parts[1], specs))
+            return fail("unknown key" + suggest(parts[1], specs))
         section = raw.setdefault(head, {})
         if isinstance(section, dict):  # otherwise the table itself is reported
             _assign(section, parts[1], value)
             origins[path] = origin
         return None
-    top = _specs(Scene)
+    top = key_specs(Scene)
     if len(parts) == 1 and head in top:
         _assign(raw, head, value)
         origins[head] = origin
         return None
     return fail("unknown section or key"
-                + _suggest(head, list(top) + list(_SECTIONS) + ["particles"]))
+                + suggest(head, list(top) + list(SECTIONS) + ["particles"]))
 
 
 def _assign(table: dict, key: str, value: Any) -> None:

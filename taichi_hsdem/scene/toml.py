@@ -16,6 +16,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 from .keys import SceneError
 
+
 def toml_string(text: str) -> str:
     """A TOML basic string, control characters escaped."""
     escapes = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n",

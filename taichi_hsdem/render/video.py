@@ -1,0 +1,266 @@
+"""Video of a run: H.264 MP4 frames (:class:`VideoWriter`) and the recorder that
+draws one realization of a running simulation into them (:class:`VideoRecorder`)."""
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from .frame import Renderer
+
+
+class VideoWriter:
+    """H.264 (libx264, yuv420p) MP4 writer for frames from :meth:`Renderer.draw`.
+
+    Frames are written at their own size: imageio-ffmpeg's default
+    ``macro_block_size=16`` would rescale any size that is not a multiple of
+    16, so it is set to 1, and frames must have even width and height
+    (yuv420p halves the chroma resolution), which the renderer guarantees.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Output file (``.mp4``); its folder must exist.
+    fps : float
+        Frames per second, > 0.
+    quality : float, optional
+        imageio-ffmpeg quality in [1, 10]; 7 gives libx264 ``-crf 15``.
+
+    Examples
+    --------
+    >>> with VideoWriter("out.mp4", fps=25) as video:        # doctest: +SKIP
+    ...     video.write(frame)
+    """
+
+    def __init__(self, path, fps, quality=7):
+        fps = float(fps)
+        if not (math.isfinite(fps) and fps > 0):
+            raise ValueError(f"fps must be a positive number, got {fps}")
+        self.path = os.fspath(path)
+        folder = os.path.dirname(os.path.abspath(self.path))
+        if not os.path.isdir(folder):
+            raise FileNotFoundError(f"folder for the video does not exist: {folder}")
+        self.fps = fps
+        self.quality = quality
+        self.frames = 0
+        self._size = None
+        self._writer = None
+
+    def write(self, frame):
+        """Append one (H, W, 3) uint8 frame; all frames must share one size."""
+        frame = np.asarray(frame)
+        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
+            raise ValueError(f"a frame must be an (H, W, 3) uint8 array, got "
+                             f"{frame.shape} {frame.dtype}")
+        if frame.shape[0] % 2 or frame.shape[1] % 2:
+            raise ValueError(f"H.264 yuv420p needs even frame sizes, got {frame.shape[:2]}")
+        if self._writer is None:
+            import imageio.v2 as imageio
+            self._size = frame.shape[:2]
+            self._writer = imageio.get_writer(
+                self.path, format="FFMPEG", mode="I", fps=self.fps, codec="libx264",
+                pixelformat="yuv420p", quality=self.quality, macro_block_size=1,
+                ffmpeg_log_level="error")
+        elif frame.shape[:2] != self._size:
+            raise ValueError(f"frame size {frame.shape[:2]} differs from the first "
+                             f"frame's {self._size}")
+        self._writer.append_data(frame)
+        self.frames += 1
+
+    def close(self):
+        """Finish the file (no file is written if no frame was)."""
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class VideoRecorder:
+    """Draws one realization of a running :class:`Simulation` into ``video.mp4``.
+
+    Pass it as ``on_frame`` to :meth:`Simulation.run` with ``frame_times`` from
+    :attr:`frame_times`: ``output.frames`` frames evenly spaced over
+    ``[0, run.t_end]``, frame 0 being the initial state (drawn before the first
+    step), played at ``output.fps``. The realization shown is
+    ``output.video_realization``. The video ends with the first frame drawn after
+    that realization stopped (a clog, or an instability): it shows the final state
+    once instead of repeating it up to ``t_end``.
+
+    The pressure colour map keeps one range for the whole video, that of the
+    pressure field at construction time, i.e. the initial solve (the open
+    channel with the particles as placed): colours compare across frames, values
+    beyond it (e.g. the inlet pressure rising behind a clog under a flow-rate
+    boundary condition) are clipped. The strip under each frame prints the range
+    next to the colour bar; :meth:`summary` reports it.
+
+    The file is written as ``<name>.part.mp4`` and renamed by
+    ``close(keep=True)``. A frame that fails to render stops the video (the run
+    goes on); :attr:`error` then says why and ``close`` keeps nothing.
+    """
+
+    def __init__(self, sim, path: Path | None, viewer=None):
+        """``path=None``: draw for ``viewer`` only (``--view`` without ``--video``)."""
+        t0 = time.perf_counter()
+        sc = sim.scene
+        m = sim.model
+        g = m.geometry
+        self.sim = sim
+        self.r = sc.output.video_realization
+        self.fps = sc.output.fps
+        self.n_frames = sc.output.frames
+        prange = pshape = extent = None
+        if sim.fluid is not None:
+            nx, ny = m.fluid_shape
+            dx = m.fluid_dx
+            pshape = (nx, ny)
+            # Square cells of side dx from the domain's lower-left corner; the
+            # top row may overhang y_max.
+            extent = (g.x_min, g.x_min + nx * dx, g.y_min, g.y_min + ny * dx)
+            prange = self._range_of(sim.pressure()[self.r])
+        self.renderer = Renderer((g.x_min, g.x_max, g.y_min, g.y_max), g.outline,
+                                 list(g.obstacles), [s.shape for s in m.species],
+                                 width=sc.output.width, pressure_shape=pshape,
+                                 pressure_range=prange, title=sc.name,
+                                 pressure_extent=extent)
+        self.viewer = viewer
+        self.path = None if path is None else Path(path)
+        self.tmp = None if path is None else self.path.with_name(self.path.name + ".part.mp4")
+        self.writer = None if path is None else VideoWriter(self.tmp, self.fps)
+        self.frames = 0
+        self.ended = False          # the shown realization stopped and its last frame is drawn
+        self.seconds = 0.0          # drawing and encoding frames, inside the run
+        self.finish_seconds = 0.0   # flushing the encoder at close
+        self.setup_seconds = time.perf_counter() - t0
+        self.error = None
+        self._fill_for = self._fill_index = None
+        self._children_cpu0 = self._children_cpu()
+        self.encoder_cpu_seconds = None
+
+    @staticmethod
+    def _children_cpu():
+        """CPU seconds of this process's finished child processes (the ffmpeg
+        encoder is one; its time is not in ``seconds``, as it encodes in
+        parallel, competing with the simulation for the cores)."""
+        try:
+            import resource
+        except ImportError:                     # not on Windows
+            return None
+        ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return ru.ru_utime + ru.ru_stime
+
+    @staticmethod
+    def _range_of(p):
+        """Finite (min, max) of a pressure field, widened when flat; None when
+        nothing is finite (no solve yet)."""
+        p = np.asarray(p, dtype=float)
+        finite = p[np.isfinite(p)]
+        if finite.size == 0:
+            return None
+        lo, hi = float(finite.min()), float(finite.max())
+        if hi <= lo:
+            hi = lo + max(1.0, abs(lo))
+        return lo, hi
+
+    def _display_pressure(self, p):
+        """The field with every non-finite cell (solid wall) given its nearest
+        finite cell's value. The renderer colours a fluid pixel by the cell
+        holding its centre; along a slanted wall that cell's centre can lie in
+        the wall (an inactive, NaN cell), which would show as a pale fleck."""
+        p = np.asarray(p, dtype=float)
+        bad = ~np.isfinite(p)
+        if not bad.any() or bad.all():
+            return p
+        if self._fill_for is None or not np.array_equal(bad, self._fill_for):
+            self._fill_for = bad
+            self._fill_index = ndimage.distance_transform_edt(
+                bad, return_distances=False, return_indices=True)
+        return p[tuple(self._fill_index)]
+
+    @property
+    def pressure_range(self):
+        """The fixed colour-map range, (p_min, p_max), or None without fluid."""
+        return self.renderer.pressure_range
+
+    @property
+    def frame_times(self) -> list[float]:
+        """Times of the frames: ``output.frames`` from 0 to ``run.t_end``."""
+        return [float(t) for t in np.linspace(0.0, self.sim.scene.run.t_end, self.n_frames)]
+
+    def __call__(self, sim):
+        if self.error is not None or self.ended:
+            return
+        t0 = time.perf_counter()
+        r = self.r
+        # stopped (checked before drawing): this frame shows the final state, the last
+        self.ended = not bool(sim.running()[r])
+        try:
+            pres = None
+            if sim.fluid is not None:
+                pres = self._display_pressure(sim.pressure()[r])
+                if self.renderer.pressure_range is None:
+                    # built before any solve: fix the range at the first frame's
+                    self.renderer.pressure_range = self._range_of(pres)
+            st = sim.state()
+            # the live counter: the results' count is only refreshed every check
+            esc = int(sim.escaped()[r])
+            frame = self.renderer.draw(st["x"][r], st["theta"][r], st["species"],
+                                       st["alive"][r], pressure=pres, t=sim.t, escapees=esc)
+            if self.writer is not None:
+                self.writer.write(frame)
+        except Exception as exc:        # a broken video must not lose the run
+            self.error = f"{type(exc).__name__}: {exc}"
+            return
+        finally:
+            self.seconds += time.perf_counter() - t0
+        self.frames += 1
+        if self.viewer is not None:
+            self.viewer.show(sim, frame)       # outside the timing: it waits for keys
+
+    def summary(self, wall_time_s: float) -> dict:
+        """``summary.json``'s ``"video"`` entry; ``wall_time_s`` is the run's
+        (which includes the frames' drawing and encoding)."""
+        share = self.seconds / wall_time_s if wall_time_s > 0 else None
+        return {"file": None if self.error or self.path is None else self.path.name,
+                "frames": self.frames, "ended_at_stop": self.ended,
+                "fps": self.fps, "realization": self.r,
+                "width": self.renderer.width, "height": self.renderer.height,
+                "pressure_range": (None if self.pressure_range is None
+                                   else list(self.pressure_range)),
+                "render_seconds": self.seconds,
+                "render_frames_per_second": (self.frames / self.seconds
+                                             if self.seconds > 0 else None),
+                "render_share_of_wall_time": share,
+                "setup_seconds": self.setup_seconds,
+                "finish_seconds": self.finish_seconds,
+                "encoder_cpu_seconds": self.encoder_cpu_seconds,
+                "error": self.error}
+
+    def close(self, keep=True):
+        """Finish the file and rename it to ``path`` (``keep``), or delete it."""
+        t0 = time.perf_counter()
+        try:
+            if self.writer is not None:
+                self.writer.close()
+        except Exception as exc:
+            if self.error is None:
+                self.error = f"{type(exc).__name__}: {exc}"
+        self.finish_seconds += time.perf_counter() - t0
+        cpu = self._children_cpu()
+        if cpu is not None and self._children_cpu0 is not None:
+            self.encoder_cpu_seconds = cpu - self._children_cpu0
+        self.renderer.close()
+        if self.viewer is not None:
+            self.viewer.close()
+        if self.tmp is None:
+            return
+        if keep and self.error is None and self.tmp.exists():
+            os.replace(self.tmp, self.path)
+        elif self.tmp.exists():
+            self.tmp.unlink()
