@@ -16,6 +16,9 @@ import contextlib
 import io
 import os
 
+import numpy as np
+from threadpoolctl import threadpool_limits
+
 # stdout belongs to the user: no import banner; and skip Taichi's probes for
 # torch/paddle, which this package never hands arrays to.
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
@@ -61,7 +64,6 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
     # solve's small vectors waits on them (measured: a 14,400-value dot product
     # 8 ms instead of 3 us): one BLAS thread, limited at run time because numpy
     # may have loaded before the environment variables could act.
-    from threadpoolctl import threadpool_limits
     _STATE["blas_limit"] = threadpool_limits(limits=1, user_api="blas")
     # Taichi prints "Starting on arch=..." on stdout; stdout belongs to the user.
     with contextlib.redirect_stdout(io.StringIO()):
@@ -87,5 +89,4 @@ def real():
 
 
 def numpy_real():
-    import numpy as np
     return np.float64 if _STATE["precision"] == "f64" else np.float32

@@ -16,7 +16,8 @@ import numpy as np
 from .geometry import shapes as shp
 from .geometry import walls as wl
 from .laws import free_permeability, harmonic_mean, kozeny_carman, restitution_factor
-from .geometry.placement import count_for_fraction
+from .fluid import PressureSolver
+from .geometry.placement import check_initial, count_for_fraction
 from .scene import Scene, SceneError
 
 # Resolution limits: below these a particle (or the constriction) is not seen by
@@ -441,7 +442,6 @@ def open_channel_speed(model: Model) -> float:
     """Mean fluid speed through the constriction of the channel without particles:
     a property of the scene, the same for every realization, so that no
     realization's numbers depend on the others run beside it."""
-    from .fluid import PressureSolver
     fl = model.scene.fluid
     solver = PressureSolver(model.fluid_active, model.fluid_dx, model.fluid_dx, fl.viscosity,
                             model.bc(), n_batch=1, tol=fl.solver_tol, gap=fl.gap)
@@ -491,7 +491,6 @@ def _initial_poses(scene: Scene, geom, templates, counts, bad):
     overlaps are refused."""
     if all(sp.positions is None for sp in scene.particles):
         return None
-    from .geometry.placement import check_initial
     rows, given_species = [], []
     for k, sp in enumerate(scene.particles):
         if sp.positions is None:

@@ -1,16 +1,61 @@
-"""Shared builders for small scenes the tests run on the CPU backend."""
+"""Shared builders for small scenes the tests run on the CPU backend.
+
+``python -m pytest --precision f32`` runs the kernels in single precision (Taichi
+takes one precision per process) and then only the tests marked
+``both_precisions``: their tolerances follow from :func:`unit_roundoff` where
+f32's round-off matters. ``tests/test_precision.py`` runs that in a subprocess of
+the default (f64) run.
+"""
 import copy
+from collections import namedtuple
 
 import numpy as np
 import pytest
 
 from taichi_hsdem import backend
 
+both_precisions = pytest.mark.both_precisions
+_PRECISION = {"value": "f64"}
+
+
+def pytest_addoption(parser):
+    parser.addoption("--precision", choices=("f64", "f32"), default="f64",
+                     help="floating-point type of the kernels for this run; f32 runs only "
+                          "the tests marked both_precisions")
+
+
+def pytest_configure(config):
+    _PRECISION["value"] = config.getoption("--precision")
+
+
+def pytest_collection_modifyitems(config, items):
+    if precision() == "f64":
+        return
+    skip = pytest.mark.skip(reason="f64 only (not marked both_precisions)")
+    for item in items:
+        if "both_precisions" not in item.keywords:
+            item.add_marker(skip)
+
+
+def precision() -> str:
+    """The kernels' floating-point type in this test process, "f64" or "f32"."""
+    return _PRECISION["value"]
+
+
+def unit_roundoff() -> float:
+    """Unit round-off of the kernels' floating-point type (2^-53 or 2^-24)."""
+    return 2.0 ** -24 if precision() == "f32" else 2.0 ** -53
+
+
+def ulp(x: float) -> float:
+    """Spacing of the kernels' floating-point numbers at ``x``."""
+    return float(np.spacing(backend.numpy_real()(x)))
+
 
 @pytest.fixture(scope="session", autouse=True)
 def _taichi_cpu():
-    # One backend per process: every test runs on the CPU in double precision.
-    backend.init("cpu", "f64")
+    # One backend per process: every test runs on the CPU, in the precision asked.
+    backend.init("cpu", precision())
 
 
 def arena_scene(particles, *, kn=1.0e4, friction=0.0, restitution=1.0, xi=0.0, length=20.0,
@@ -33,7 +78,8 @@ def arena_scene(particles, *, kn=1.0e4, friction=0.0, restitution=1.0, xi=0.0, l
     scene = {
         "name": "arena",
         "units": "dimensionless",
-        "run": {"t_end": 1.0, "dt": dt, "dt_safety": dt_safety, "realizations": realizations},
+        "run": {"t_end": 1.0, "dt": dt, "dt_safety": dt_safety, "realizations": realizations,
+                "precision": precision()},
         "fluid": {"enabled": False, "gap": 1.0},
         "geometry": {
             "kind": "polygon",
@@ -62,17 +108,20 @@ def make_sim(scene_dict):
     return Simulation(load_scene(scene_dict), place_particles=False)
 
 
+HeadOn = namedtuple("HeadOn", "ratio v dt")
+
+
 def head_on(e, fast_path=True, dt_safety=0.02, nodes=40):
     """Two unit disks (kn 1e4, no fluid) meet head on at relative speed 2: the
-    rebound ratio, which the continuous spring-dashpot makes exactly ``e``, and
-    the final velocities."""
+    rebound ratio, which the continuous spring-dashpot makes exactly ``e``, the
+    final velocities and the time step."""
     sim = make_sim(arena_scene([{"shape": "circle", "diameter": 1.0, "count": 2,
                                  "nodes": nodes}], restitution=e, fast_path=fast_path,
                                dt_safety=dt_safety))
     sim.set_state([[[8.0, 5.0], [10.0, 5.0]]], v=[[[1.0, 0.0], [-1.0, 0.0]]])
     sim.step(int(1.2 / sim.dt))          # approach (0.5), contact, separation
     v = sim.state()["v"][0]
-    return (v[1, 0] - v[0, 0]) / 2.0, v
+    return HeadOn((v[1, 0] - v[0, 0]) / 2.0, v, sim.dt)
 
 
 def speed(v):

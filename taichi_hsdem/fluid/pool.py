@@ -28,6 +28,7 @@ import os
 import pickle
 import subprocess
 import sys
+import time
 import traceback
 
 import numpy as np
@@ -76,7 +77,6 @@ def solve_block(token, pattern, rows, new_data, rhs, guess, tol, maxiter):
         ``|b - A x| / |b|`` (0 where ``b == 0``: the answer is 0).
     setup_seconds : float
     """
-    import time
 
     import pyamg
     import scipy.sparse as sp

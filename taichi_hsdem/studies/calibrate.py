@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 import numpy as np
+from scipy import optimize
 
 from .. import stats
 from ..scene import load_scene
@@ -192,7 +193,6 @@ def _pooled_root(evals: list[Evaluation], target: float) -> tuple[float, float]:
     evaluations (a clogged realization contributes ``(1 - p)^s p``, a censored
     one ``(1 - p)^s``, ``p = 1/(1 + <s>)``, as in :mod:`taichi_hsdem.stats`);
     returns (root, b)."""
-    from scipy import optimize
 
     x = np.array([e.value for e in evals])
     k = np.array([e.n_clogged for e in evals], dtype=float)

@@ -98,6 +98,7 @@ import numpy as np
 from .. import stats
 from ..laws import theory_escapees
 from ..output import atomic_write, json_safe
+from ..resolve import resolve
 from .digest import code_digest
 from .points import (DEFAULT_POINTS, DEFAULT_REALIZATIONS, FIGURES, PAPER_REALIZATIONS,
                      QUICK_POINTS, SPEC, FigureError, PointRun, base_scene, build_points,
@@ -365,7 +366,6 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
             raise FigureError(f"{base.source}: fluid.bc: escapees-time needs a flow-rate inlet "
                               f"(the theory line uses Q = fluid.flow_rate)")
         points = build_points(command, base, opts)
-        from ..resolve import resolve
         for p in points:       # refuse impossible set-ups before any compute
             resolve(p.scene.with_values({"run.realizations": 1}))
     except SceneError as exc:

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..geometry.walls import fluid_area
 from ..output import atomic_write, json_safe
+from ..resolve import species_shape
 from ..scene import Scene, load_scene, scene_to_toml
 from .digest import code_digest
 
@@ -110,7 +111,6 @@ class PointRun:
 
 def bounding_diameter(scene: Scene, species: int = 0) -> float:
     """Bounding (circumscribed) diameter ``d_b`` of a species' shape."""
-    from ..resolve import species_shape
     return 2.0 * species_shape(scene.particles[species]).bounding_radius
 
 
