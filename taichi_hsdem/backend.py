@@ -67,8 +67,12 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
     _STATE["blas_limit"] = threadpool_limits(limits=1, user_api="blas")
     # Taichi prints "Starting on arch=..." on stdout; stdout belongs to the user.
     with contextlib.redirect_stdout(io.StringIO()):
+        # fast_math=False: LLVM may not reorder floating-point arithmetic, so the
+        # kernels compute exactly what their source says on every CPU. With Taichi's
+        # default (fast_math=True) the fused and the per-step paths, or two CPUs with
+        # and without AVX-512, round differently (seen: 1e-13 apart).
         ti.init(arch=target, default_fp=fp, default_ip=ti.i32, log_level=ti.ERROR,
-                offline_cache=True)
+                offline_cache=True, fast_math=False)
     used = ti.lang.impl.current_cfg().arch.name
     if arch == "gpu" and used in ("x64", "arm64"):
         raise BackendError("arch=gpu was requested but Taichi found no usable GPU "

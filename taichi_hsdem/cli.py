@@ -1,32 +1,51 @@
-"""``python -m taichi_hsdem SCENE.toml``: run a scene, write its results.
+"""``python -m taichi_hsdem SCENE.toml``: run a scene, write its results;
+``python -m taichi_hsdem --resume DIR``: continue the checkpoint a run left in DIR.
 
-Exit status: 0 success; 2 the scene or the arguments are invalid (one line per
-problem, no traceback); 1 the run failed (numerical instability, a fluid solve
-that did not balance), with what to change.
+Exit status: 0 success; 2 the scene, the arguments or the output folder are
+invalid (one line per problem, no traceback, nothing written); 1 the run failed
+(numerical instability, a fluid solve that did not balance, results that could
+not be written), with what to change; 130 interrupted (Ctrl-C), with one line
+saying what was kept.
+
+A folder never mixes two runs: nothing in it changes until the run ends, then
+the results are written together (each file through a temporary one), summary
+last, and result files of an earlier run that this one does not write are
+removed. An interrupted run writes its results marked ``"status":
+"interrupted"`` with the time reached, and a checkpoint.
 """
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import sys
+import tempfile
 import time
 from pathlib import Path
 
-EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
+from . import checkpoint, output
+from .scene import SceneError, load_scene
+from .scene.toml import parse_toml
+
+EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_INTERRUPTED = 0, 1, 2, 130
+# Keys a resumed run may change: its end and what it writes.
+RESUMABLE_KEYS = ("run.t_end", "output.")
 
 
 class Parser(argparse.ArgumentParser):
     """argparse with the project's exit status for bad arguments (2, one line)."""
 
     def error(self, message):
-        self.print_usage(sys.stderr)
         print(f"{self.prog}: {message}", file=sys.stderr)
         sys.exit(EXIT_INVALID)
 
 
 def _parser() -> argparse.ArgumentParser:
     p = Parser(prog="python -m taichi_hsdem",
-                description="Run a taichi_hsdem scene (LS-DEM + Hele-Shaw clogging simulation).")
-    p.add_argument("scene", help="scene TOML file (see docs/scene.md)")
+               description="Run a taichi_hsdem scene (LS-DEM + Hele-Shaw clogging simulation).")
+    p.add_argument("scene", nargs="?", help="scene TOML file (see docs/scene.md)")
+    p.add_argument("--resume", metavar="DIR",
+                   help="continue the checkpoint in DIR (a run's output folder)")
     p.add_argument("--out", help="output folder (default: the scene's output.dir, runs/<name>/)")
     p.add_argument("--arch", choices=("cpu", "gpu", "auto"), help="Taichi backend")
     p.add_argument("--realizations", type=int, metavar="N", help="number of realizations")
@@ -37,6 +56,8 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--video", dest="video", action="store_true", default=None,
                    help="write video.mp4")
     v.add_argument("--no-video", dest="video", action="store_false", help="no video")
+    p.add_argument("--vtk", action="store_true", default=None,
+                   help="write a ParaView series (series.pvd) at the video's frame times")
     p.add_argument("--view", action="store_true",
                    help="live window (needs a display): space pause, n step, s screenshot, Esc close")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
@@ -46,15 +67,15 @@ def _parser() -> argparse.ArgumentParser:
 class _Progress:
     """A bar on a terminal, a plain line every ~10 % otherwise, nothing when quiet."""
 
-    def __init__(self, quiet: bool, t_end: float):
+    def __init__(self, quiet: bool, t0: float, t_end: float):
         self.quiet = quiet
         self.bar = None
-        self.next_frac = 0.1
         self.t_end = t_end
-        self.t0 = time.perf_counter()
+        self.next_frac = 0.1 * (int(10 * t0 / t_end) + 1) if t_end > 0 else 1.0
+        self.wall0 = time.perf_counter()
         if not quiet and sys.stderr.isatty():
             from tqdm import tqdm
-            self.bar = tqdm(total=t_end, unit="s(sim)", file=sys.stderr,
+            self.bar = tqdm(total=t_end, initial=t0, unit="s(sim)", file=sys.stderr,
                             bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s [{elapsed}<{remaining}]")
 
     def __call__(self, t, t_end):
@@ -64,7 +85,7 @@ class _Progress:
             self.bar.update(min(t, t_end) - self.bar.n)
         elif t >= self.next_frac * t_end:
             print(f"t = {t:.4g} / {t_end:.4g} s ({100 * t / t_end:.0f} %), "
-                  f"{time.perf_counter() - self.t0:.1f} s wall", file=sys.stderr, flush=True)
+                  f"{time.perf_counter() - self.wall0:.1f} s wall", file=sys.stderr, flush=True)
             while self.next_frac * t_end <= t:
                 self.next_frac += 0.1
 
@@ -73,17 +94,39 @@ class _Progress:
             self.bar.close()
 
 
+class _Interrupt:
+    """Ctrl-C during the run: the first asks the run to stop at the next chunk of
+    steps (results and a checkpoint are kept), a second one stops at once."""
+
+    def __init__(self):
+        self.requested = False
+        self.previous = None
+
+    def __enter__(self):
+        def handler(signum, frame):
+            if self.requested:
+                raise KeyboardInterrupt
+            self.requested = True
+        try:
+            self.previous = signal.signal(signal.SIGINT, handler)
+        except ValueError:          # not the main thread: Ctrl-C stays as it is
+            self.previous = None
+        return self
+
+    def __exit__(self, *exc):
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+
+    def __call__(self) -> bool:
+        return self.requested
+
+
 def _say(quiet, msg):
     if not quiet:
         print(msg, file=sys.stderr, flush=True)
 
 
-def main(argv=None) -> int:
-    try:
-        args = _parser().parse_args(argv)
-    except SystemExit as exc:          # --help (0) or a bad argument (2)
-        return exc.code
-    from .scene import SceneError, load_scene
+def _overrides(args) -> list[str]:
     overrides = list(args.set)
     if args.arch is not None:
         overrides.append(f'run.arch="{args.arch}"')
@@ -93,82 +136,156 @@ def main(argv=None) -> int:
         overrides.append(f"run.seed={args.seed}")
     if args.video is not None:
         overrides.append(f"output.video={'true' if args.video else 'false'}")
+    if args.vtk:
+        overrides.append("output.vtk=true")
+    return overrides
+
+
+def output_folder_problem(out: Path, key: str) -> str | None:
+    """Why results cannot be written to folder ``out`` (``key`` names where it came
+    from: ``--out`` or ``FILE: output.dir``), or None. Creates nothing."""
+    if out.exists() and not out.is_dir():
+        return f"{key}: {out} is a file, not a folder"
+    probe = out
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        return f"{key}: {out} lies under {probe}, which is a file"
+    if not os.access(probe, os.W_OK | os.X_OK):
+        return f"{key}: cannot write in {probe} (permission denied)"
     try:
-        scene = load_scene(args.scene, overrides)
+        with tempfile.TemporaryFile(dir=probe):
+            pass
+    except OSError as exc:
+        return f"{key}: cannot write in {probe} ({exc.strerror or exc})"
+    return None
+
+
+def _load(args) -> tuple:
+    """The scene (and checkpoint path) the arguments ask for; SceneError otherwise."""
+    if args.resume is None:
+        if args.scene is None:
+            raise SceneError("python -m taichi_hsdem: give a scene file, or --resume DIR")
+        return load_scene(args.scene, _overrides(args)), None
+    if args.scene is not None:
+        raise SceneError(f"--resume: give either a scene file ({args.scene}) or --resume "
+                         f"{args.resume}, not both")
+    path = Path(args.resume) / checkpoint.FILE
+    try:
+        header = checkpoint.read_header(path)
+    except checkpoint.CheckpointError as exc:
+        raise SceneError(f"--resume: {exc}") from None
+    sets = _overrides(args)
+    for text in sets:
+        key = text.partition("=")[0].strip()
+        if not any(key == k or (k.endswith(".") and key.startswith(k))
+                   for k in RESUMABLE_KEYS):
+            raise SceneError(f"--resume: --set {key}: only run.t_end and the output keys "
+                             f"can change when a run is continued")
+    raw = parse_toml(header["scene"])
+    raw.setdefault("output", {})["dir"] = str(args.resume)
+    scene = load_scene(raw, sets)
+    return scene, path
+
+
+def main(argv=None) -> int:
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:          # --help (0) or a bad argument (2)
+        return exc.code
+    try:
+        return _main(args)
+    except KeyboardInterrupt:
+        print("interrupted before the run started: nothing was written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _main(args) -> int:
+    try:
+        scene, resume_from = _load(args)
     except SceneError as exc:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID
-    from .output import write_resolved_scene, write_series, write_summary
-    from .runner import UNSTABLE_HINT, RunFailed, build, execute
     out = Path(args.out) if args.out else Path(scene.output.dir)
+    where = "--out" if args.out else ("--resume" if resume_from else
+                                      f"{scene.source}: output.dir")
+    problem = output_folder_problem(out, where)
+    if problem:
+        print(problem, file=sys.stderr)
+        return EXIT_INVALID
+    # The simulator loads Taichi (about a second): only once the scene is valid.
+    from .runner import UNSTABLE_HINT, RunFailed, build, execute
     try:
-        sim = build(scene)
+        sim = build(scene, place_particles=resume_from is None)
+        if resume_from is not None:
+            checkpoint.restore(sim, resume_from)
     except RunFailed as exc:
         for line in exc.lines:
             print(line, file=sys.stderr)
         return EXIT_INVALID
-    out.mkdir(parents=True, exist_ok=True)
-    write_resolved_scene(sim.scene, out, sim.model.notes)
-    _say(args.quiet, f"{scene.name}: {sim.R} realization(s) x {sim.N} particles, "
-         f"dt = {sim.dt:.3g} s, {sim.model.species[0].shape.name if len(sim.model.species) == 1 else 'mixed'} "
-         f"({'disk' if sim.model.all_disks else 'level-set'} contacts), arch {sim.arch} -> {out}")
-    recorder = None
-    frame_times = None
-    video_skipped = None
-    viewer = None
-    if args.view:
-        from .render.viewer import LiveViewer, display_available
-        ok, why = display_available()
-        if ok:
-            viewer = LiveViewer(out, title=f"taichi_hsdem: {sim.scene.name}")
-        else:
-            print(f"--view skipped: {why}", file=sys.stderr)
-    if sim.scene.output.video or viewer is not None:
-        from .render import VideoRecorder, vulkan_status
-        ok, why = vulkan_status()
-        if ok:
-            recorder = VideoRecorder(sim, out / "video.mp4" if sim.scene.output.video else None,
-                                     viewer=viewer)
-            frame_times = recorder.frame_times
-        else:
-            video_skipped = why
-            # the user asked for a picture: say so even with --quiet
-            print(f"rendering skipped: {why}", file=sys.stderr)
-    progress = _Progress(args.quiet, sim.scene.run.t_end)
-    try:
-        result = execute(sim, progress=progress, on_frame=recorder, frame_times=frame_times)
-    except BaseException as exc:        # also Ctrl-C or a bug: leave no half-written video
+    except checkpoint.CheckpointError as exc:
+        print(f"--resume: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    sc = sim.scene
+    _say(args.quiet, f"{sc.name}: {sim.R} realization(s) x {sim.N} particles, "
+         f"dt = {sim.dt:.3g} s, "
+         f"{sim.model.species[0].shape.name if len(sim.model.species) == 1 else 'mixed'} "
+         f"({'disk' if sim.model.all_disks else 'level-set'} contacts), arch {sim.arch}"
+         + (f", resumed at t = {sim.t:.4g} s" if resume_from else "") + f" -> {out}")
+    with output.Staging(out) as staged:
+        pictures = output.Pictures(sim, staged, view=args.view, quiet=args.quiet,
+                                   resumed=resume_from is not None)
+        progress = _Progress(args.quiet, sim.t, sc.run.t_end)
+        saver = output.CheckpointClock(sim, staged, sc.output.checkpoint_every)
+        with _Interrupt() as interrupt:
+            try:
+                result = execute(sim, progress=progress, on_frame=pictures.on_frame,
+                                 frame_times=pictures.frame_times, stop=interrupt,
+                                 on_chunk=saver)
+            except RunFailed as exc:
+                progress.close()
+                pictures.discard()
+                for line in exc.lines:
+                    print(f"run failed: {line}", file=sys.stderr)
+                return EXIT_FAILED
+            except KeyboardInterrupt:   # a second Ctrl-C: stop now, keep nothing new
+                progress.close()
+                pictures.discard()
+                print("interrupted twice: stopped at once; the output folder is as it was",
+                      file=sys.stderr)
+                return EXIT_INTERRUPTED
         progress.close()
-        if recorder is not None:
-            recorder.close(keep=False)
-        if isinstance(exc, RunFailed):
-            for line in exc.lines:
-                print(f"run failed: {line}", file=sys.stderr)
+        pictures.finish(result)
+        try:
+            saver.save()            # the end state: --resume extends the run
+            written = staged.publish(result, pictures.files(),
+                                     resumed=resume_from is not None) + [checkpoint.FILE]
+        except OSError as exc:
+            print(f"could not write the results to {out}: {exc.strerror or exc}; nothing "
+                  "was kept", file=sys.stderr)
             return EXIT_FAILED
-        raise
-    progress.close()
-    if recorder is not None:
-        recorder.close(keep=True)
-        result.summary["video"] = recorder.summary(result.summary["wall_time_s"])
-        if recorder.error is not None:
-            print(f"video not written: rendering failed ({recorder.error})", file=sys.stderr)
-    elif video_skipped is not None:
-        result.summary["video"] = {"file": None, "skipped": video_skipped}
-    statuses = [r["status"] for r in result.summary["realizations"]]
-    write_summary(result.summary, out)
-    write_series(result.series, statuses, out)
-    bad = [(k, r) for k, r in enumerate(result.summary["realizations"]) if r["status"] != "ok"]
+    s = result.summary
+    if sim.interrupted:
+        print(f"interrupted at t = {sim.t:.4g} of {sc.run.t_end:.4g} s: kept "
+              f"{', '.join(written)} in {out} (status \"interrupted\"); continue with "
+              f"python -m taichi_hsdem --resume {out}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    bad = [(k, r) for k, r in enumerate(s["realizations"]) if r["status"] == "unstable"]
     if bad:
         for k, r in bad:
             print(f"realization {k} (seed {r['seed']}) went unstable at t = {r['t_stop']:.4g} s: "
                   f"{r['reason']}", file=sys.stderr)
         print(f"its results were not written; {UNSTABLE_HINT}", file=sys.stderr)
         return EXIT_FAILED
-    s = result.summary
     clogged = sum(1 for r in s["realizations"] if r["clogged"])
-    _say(args.quiet, f"done in {s['wall_time_s']:.1f} s: {s['steps']} steps, mean escapees "
-         f"{s['mean_escapees']:.3g}, {clogged}/{len(s['realizations'])} clogged -> {out}")
+    stats = s["statistics"] or {}
+    mean = output.estimate_text(s["mean_escapees"], s["mean_escapees_ci"])
+    _say(args.quiet, f"done in {s['wall_time_s']:.1f} s: {s['steps']} steps, <s> = {mean} "
+         f"(censoring-aware), {clogged}/{len(s['realizations'])} clogged, "
+         f"{stats.get('n_never_clogged', 0)} never clogged -> {out}")
     return EXIT_OK
 
 

@@ -390,6 +390,17 @@ class SeriesWriter:
         self._frames[r] = k + 1
         self._write_index(r)
 
+    @property
+    def frames_written(self) -> int:
+        """Frames in the series, over all realizations (kept ones of a resumed
+        series included)."""
+        return sum(self._frames.values())
+
+    def last_time(self, realization=None) -> float | None:
+        """Time of the realization's latest frame, or None before the first."""
+        entries = self._entries[self._realization(realization)]
+        return entries[-1][0] if entries else None
+
     def _realization(self, realization):
         if realization is None:
             if len(self.realizations) != 1:

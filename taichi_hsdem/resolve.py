@@ -13,12 +13,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import limits
+from .dem.layout import DISK_HISTORY_SLOTS, LS_HISTORY_SLOTS
+from .fluid import PressureSolver
+from .fluid.pool import usable_cpus
 from .geometry import shapes as shp
 from .geometry import walls as wl
-from .laws import free_permeability, harmonic_mean, kozeny_carman, restitution_factor
-from .fluid import PressureSolver
 from .geometry.placement import check_initial, count_for_fraction
+from .laws import free_permeability, harmonic_mean, kozeny_carman, restitution_factor
+from .limits import Part
 from .scene import Scene, SceneError
+from .scene.keys import MAX_PACKING_FRACTION
 
 # Resolution limits: below these a particle (or the constriction) is not seen by
 # the grid that has to represent it.
@@ -26,6 +31,10 @@ MIN_FLUID_CELLS_PER_DIAMETER = 2.0
 MIN_WALL_CELLS_PER_DIAMETER = 4.0
 MIN_LS_CELLS_PER_DIAMETER = 5.0
 MIN_FLUID_CELLS_ACROSS_CONSTRICTION = 3.0
+# Bytes per surface node of a template (positions, lengths, normals, boundary vectors).
+NODE_BYTES = 64
+# Derived numbers must lie this far inside the kernels' float range.
+REPRESENTABLE_MARGIN = 1.0e6
 
 # How often things happen, for the "auto" values decided at the end of resolve().
 CHECK_INTERVAL = 100          # steps between host-side checks, at least
@@ -193,220 +202,490 @@ def _face_nodes(s: shp.Shape) -> int:
     return int(math.ceil(len(s.nodes) * edges.max() / s.perimeter)) + 1
 
 
+class _Resolution:
+    """The state of one :func:`resolve`: the values it fills into the scene, the
+    reasons it records, and the problems it finds (raised together per stage)."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.src = scene.source
+        self.problems: list[str] = []
+        self.values: dict = {}
+        self.notes: dict[str, str] = {}
+        fi = np.finfo(np.float32 if scene.run.precision == "f32" else np.float64)
+        # A derived number must sit well inside the kernels' float range (kernels
+        # multiply a few of them together).
+        self.smallest, self.largest = float(fi.tiny) * REPRESENTABLE_MARGIN, \
+            float(fi.max) / REPRESENTABLE_MARGIN
+
+    def bad(self, key: str, msg: str):
+        self.problems.append(f"{self.src}: {key}: {msg}")
+
+    def stop_if_bad(self):
+        if self.problems:
+            raise SceneError(self.problems)
+
+    def note(self, key: str, value, why: str):
+        """Record an ``auto`` (or derived) value and why, and fill it into the scene."""
+        self.values[key] = value
+        self.notes[key] = f"{_show(value)}: {why}"
+
+    def derived(self, what: str, compute, keys: str, unit: str = "",
+                squared: bool = False) -> float:
+        """``compute()``, a number the kernels hold, checked: finite, positive and
+        representable in the run's precision (``squared``: its square too, for the
+        stiffnesses and masses the kernels multiply in pairs); else a problem naming
+        ``keys`` (the scene keys it comes from) and nan."""
+        try:
+            value = float(compute())
+        except (ArithmeticError, ValueError):
+            value = math.inf
+        lo, hi = ((math.sqrt(self.smallest), math.sqrt(self.largest)) if squared
+                  else (self.smallest, self.largest))
+        if math.isfinite(value) and lo <= value <= hi:
+            return value
+        prec = self.scene.run.precision
+        shown = f"{value:.3g}{' ' + unit if unit and math.isfinite(value) else ''}"
+        self.bad(keys, f"these values make the {what} {shown}, outside what the "
+                       f"{prec} kernels can compute with ({lo:.3g} to {hi:.3g}); use values "
+                       "of ordinary size (SI, or dimensionless numbers near 1)")
+        return math.nan
+
+
+def _show(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    return str(value)
+
+
+def _size_keys(k: int, sp) -> str:
+    """The keys that set the size of species ``k``'s shape."""
+    keys = {"circle": ("diameter",), "regular_polygon": ("diameter",), "square": ("side",),
+            "rectangle": ("width", "height"), "polygon": ("vertices",)}[sp.shape]
+    return ", ".join(f"particles[{k}].{name}" for name in keys)
+
+
+def _bounding_box(g) -> tuple[float, float, float, float]:
+    """(x_min, x_max, y_min, y_max) of the geometry a scene asks for, from its keys
+    alone (before the outline is built)."""
+    if g.kind == "hourglass":
+        return 0.0, g.length, -g.width / 2, g.width / 2
+    if g.kind == "converging":
+        taper = 0.0 if g.angle == 90 else \
+            (g.width_in - g.constriction_width) / 2 / math.tan(math.radians(g.angle))
+        half = max(g.width_in, g.width_out) / 2
+        return 0.0, g.length_in + taper + g.constriction_length + g.length_out, -half, half
+    pts = np.asarray(g.outline, dtype=float)
+    return (float(pts[:, 0].min()), float(pts[:, 0].max()), float(pts[:, 1].min()),
+            float(pts[:, 1].max()))
+
+
+def _grid_nodes(box, h: float, pad: float) -> float:
+    """Nodes of a grid of spacing ``h`` over ``box`` grown by ``pad`` on every side."""
+    return ((box[1] - box[0] + 2 * pad) / h + 2) * ((box[3] - box[2] + 2 * pad) / h + 2)
+
+
+def _wall_grid_part(scene: Scene, box, wall_h: float) -> Part:
+    nodes = _grid_nodes(box, wall_h, 4 * wall_h)
+    what = (f"the wall level set ({nodes:.3g} nodes of {wall_h:.3g} over the "
+            f"{box[1] - box[0]:.3g} x {box[3] - box[2]:.3g} channel)")
+    g = scene.geometry
+    if g.kind == "converging" and box[1] > 100 * (box[3] - box[2]):
+        # the channel is long because the taper is
+        taper = box[1] - g.length_in - g.constriction_length - g.length_out
+        return Part("geometry.angle", what, nodes * limits.WALL_NODE_BYTES,
+                    f"a half-angle of {g.angle:g} degrees makes the converging section "
+                    f"{taper:.3g} long; use a larger angle")
+    need = _cell_for(nodes * wall_h ** 2 * limits.WALL_NODE_BYTES)
+    return Part("geometry.wall_cell_size", what, nodes * limits.WALL_NODE_BYTES,
+                f"use geometry.wall_cell_size >= {need:.3g}, or a smaller channel")
+
+
+def _cell_for(area_bytes: float) -> float:
+    """The grid spacing at which a grid over an area (given as area x bytes per node)
+    uses half the available memory."""
+    available = limits.available_memory() or 16e9
+    return math.sqrt(area_bytes / (0.5 * limits.MEMORY_FRACTION * available))
+
+
+def _check_feed(res: _Resolution, geom: wl.Geometry, key: str, strip, d_max: float):
+    """A feed strip must lie in the channel and hold fluid a particle fits in."""
+    x0, x1 = strip
+    if x1 <= geom.x_min or x0 >= geom.x_max:
+        res.bad(key, f"[{x0:g}, {x1:g}] lies outside the channel, which spans x = "
+                     f"[{geom.x_min:g}, {geom.x_max:g}]")
+        return
+    lo, hi = max(x0, geom.x_min), min(x1, geom.x_max)
+    if wl.fluid_area(geom, lo, hi) < 0.25 * math.pi * d_max ** 2:
+        res.bad(key, f"[{x0:g}, {x1:g}] holds less fluid than one particle of d = "
+                     f"{d_max:g} covers")
+
+
 def resolve(scene: Scene, arch: str = "x64") -> Model:
     """Resolve every derived and ``auto`` value of ``scene``; refuse what cannot work.
 
     ``arch`` is the Taichi backend the run uses (``backend.init``'s answer:
     ``x64``/``arm64`` for the CPU, ``cuda``, ``vulkan``, ...): it decides
-    ``run.stepping = "auto"``.
+    ``run.stepping = "auto"``. Sizes are estimated before anything large is built:
+    a scene whose grids and arrays would not fit in memory, or whose step count
+    could never finish, is refused with the key to change (:mod:`.limits`).
     """
+    # Every derived number is checked (Resolution.derived) and reported in the
+    # user's terms: numpy's own overflow warnings would only repeat it on stderr.
+    with np.errstate(all="ignore"):
+        return _resolve(scene, arch)
+
+
+def _resolve(scene: Scene, arch: str) -> Model:
+    res = _Resolution(scene)
     src = scene.source
-    problems: list[str] = []
-
-    def bad(key, msg):
-        problems.append(f"{src}: {key}: {msg}")
-
+    budget = limits.available_memory()
+    # Shapes: surface nodes are arrays of the node count, before anything is built.
+    for k, sp in enumerate(scene.particles):
+        part = Part(f"particles[{k}].nodes", f"a template of {sp.nodes} surface nodes",
+                    sp.nodes * NODE_BYTES, "use far fewer (40 to a few hundred)")
+        res.problems += limits.memory_problems([part], src, budget)
+    res.stop_if_bad()
     try:
         templates = [species_shape(sp) for sp in scene.particles]
     except ValueError as exc:
         raise SceneError([f"{src}: particles: {exc}"]) from None
-    try:
-        geom = _geometry(scene.geometry)
-    except ValueError as exc:
-        raise SceneError([f"{src}: geometry: {exc}"]) from None
     d_eq = [t.equivalent_diameter for t in templates]
     d_min, d_max = min(d_eq), max(d_eq)
-    values: dict = {}
-    notes: dict[str, str] = {}
     all_disks = scene.contact.disk_fast_path and all(t.kind == "circle" for t in templates)
 
-    # Walls.
+    # Walls: the grid's size is known from the keys; refuse one that cannot fit
+    # before the outline is built.
     g = scene.geometry
     wall_h = d_min / 10.0 if g.wall_cell_size == "auto" else g.wall_cell_size
     if g.wall_cell_size == "auto":
-        values["geometry.wall_cell_size"] = wall_h
-        notes["geometry.wall_cell_size"] = "smallest particle d_eq / 10"
+        res.note("geometry.wall_cell_size", wall_h, "smallest particle d_eq / 10")
     elif wall_h > d_min / MIN_WALL_CELLS_PER_DIAMETER:
-        bad("geometry.wall_cell_size", f"{wall_h:g} is too coarse for particles of d = {d_min:g}: "
-            f"use at most d/{MIN_WALL_CELLS_PER_DIAMETER:g} = {d_min / MIN_WALL_CELLS_PER_DIAMETER:g}")
+        res.bad("geometry.wall_cell_size", f"{wall_h:g} is too coarse for particles of "
+                f"d = {d_min:g}: use at most d/{MIN_WALL_CELLS_PER_DIAMETER:g} = "
+                f"{d_min / MIN_WALL_CELLS_PER_DIAMETER:g}")
+    box = _bounding_box(g)
+    res.problems += limits.memory_problems([_wall_grid_part(scene, box, wall_h)], src, budget)
+    res.stop_if_bad()
+    try:
+        geom = _geometry(g)
+    except ValueError as exc:
+        raise SceneError([f"{src}: geometry: {exc}"]) from None
     if geom.constriction_width < d_min:
-        notes["geometry"] = (f"the constriction ({geom.constriction_width:g}) is narrower than the "
-                             f"smallest particle ({d_min:g}): nothing can pass")
+        res.notes["geometry"] = (f"the constriction ({geom.constriction_width:g}) is narrower "
+                                 f"than the smallest particle ({d_min:g}): nothing can pass")
     esc = 0.5 * d_max if g.escape_offset is None else g.escape_offset
-    values["geometry.escape_offset"] = esc
+    if g.escape_offset is None:
+        res.note("geometry.escape_offset", esc, "half the largest particle d_eq")
+    else:
+        res.values["geometry.escape_offset"] = esc
     x_escape = geom.constriction_x1 + esc
     if x_escape >= geom.x_max:
-        bad("geometry.escape_offset", f"the escape line x = {x_escape:g} lies beyond the outlet "
-            f"x = {geom.x_max:g}")
+        res.bad("geometry.escape_offset", f"the escape line x = {x_escape:g} lies beyond the "
+                f"outlet x = {geom.x_max:g}")
 
     # Fluid.
     f = scene.fluid
-    kappa_free = free_permeability(f.gap) if f.enabled else 0.0
+    kappa_free = (res.derived("free permeability H^2/12", lambda: free_permeability(f.gap),
+                              "fluid.gap", "m^2") if f.enabled else 0.0)
     kps = []
-    for sp, t in zip(scene.particles, templates):
+    for k, (sp, t) in enumerate(zip(scene.particles, templates)):
         if f.enabled:
             try:
-                kps.append(kozeny_carman(t.sphericity, t.equivalent_diameter, t.area, f.gap))
+                kps.append(res.derived(
+                    f"Kozeny-Carman permeability inside particles[{k}]",
+                    lambda: kozeny_carman(t.sphericity, t.equivalent_diameter, t.area, f.gap),
+                    f"fluid.gap, {_size_keys(k, sp)}", "m^2"))
             except ValueError as exc:
-                bad("fluid.gap", f"{exc} (species '{sp.name}')")
+                res.bad("fluid.gap", f"{exc} (species '{sp.name}')")
                 kps.append(kappa_free)
         else:
             kps.append(0.0)
     fluid_dx = None
     if f.enabled:
         fluid_dx = d_min / 6.0 if f.cell_size == "auto" else f.cell_size
-        if f.cell_size == "auto":
-            notes["fluid.cell_size"] = "smallest particle d_eq / 6"
-        elif fluid_dx > d_min / MIN_FLUID_CELLS_PER_DIAMETER:
-            bad("fluid.cell_size", f"{fluid_dx:g} is too coarse for particles of d = {d_min:g}: "
-                f"a particle must span at least {MIN_FLUID_CELLS_PER_DIAMETER:g} cells "
-                f"(cell_size <= {d_min / MIN_FLUID_CELLS_PER_DIAMETER:g})")
+        if f.cell_size != "auto" and fluid_dx > d_min / MIN_FLUID_CELLS_PER_DIAMETER:
+            res.bad("fluid.cell_size", f"{fluid_dx:g} is too coarse for particles of d = "
+                    f"{d_min:g}: a particle must span at least "
+                    f"{MIN_FLUID_CELLS_PER_DIAMETER:g} cells (cell_size <= "
+                    f"{d_min / MIN_FLUID_CELLS_PER_DIAMETER:g})")
         if geom.constriction_width / fluid_dx < MIN_FLUID_CELLS_ACROSS_CONSTRICTION:
-            bad("fluid.cell_size", f"{fluid_dx:g} leaves fewer than "
-                f"{MIN_FLUID_CELLS_ACROSS_CONSTRICTION:g} cells across the constriction "
-                f"(width {geom.constriction_width:g})")
+            res.bad("fluid.cell_size", f"{fluid_dx:g} leaves fewer than "
+                    f"{MIN_FLUID_CELLS_ACROSS_CONSTRICTION:g} cells across the constriction "
+                    f"(width {geom.constriction_width:g})")
+        if f.bc == "pressure":
+            for key in ("fluid.p_in", "fluid.p_out"):
+                value = getattr(f, key.split(".")[1])
+                if abs(value) > res.largest:
+                    res.bad(key, f"{value:g} is outside what the {scene.run.precision} "
+                                 f"kernels can hold (|p| <= {res.largest:.3g})")
 
-    # Species mechanics.
+    # Species: counts, surface nodes, masses, damping.
     species: list[Species] = []
-    region = tuple(scene.feed.region) if scene.feed.region is not None else tuple(geom.upstream_region)
-    values["feed.region"] = list(region)
+    if scene.feed.region is not None:
+        region = tuple(scene.feed.region)
+        res.values["feed.region"] = list(region)
+    else:
+        region = tuple(geom.upstream_region)
+        res.note("feed.region", list(region), "the straight section upstream of the "
+                 "constriction")
+    _check_feed(res, geom, "feed.region", region, d_max)
+    res.stop_if_bad()
     for k, (sp, t, kp) in enumerate(zip(scene.particles, templates, kps)):
         key = f"particles[{k}]"
         if sp.count is not None:
             count = int(sp.count)
         else:
             count = count_for_fraction(sp.packing_fraction, geom, region, t)
-            values[f"particles.{k}.count"] = count
-            values[f"particles.{k}.packing_fraction"] = None
-            notes[f"particles.{k}.count"] = (f"packing fraction {sp.packing_fraction:g} of the control "
-                                             f"volume x in [{region[0]:g}, {region[1]:g}]")
+            res.values[f"particles.{k}.packing_fraction"] = None
+            res.note(f"particles.{k}.count", count, f"packing fraction "
+                     f"{sp.packing_fraction:g} of the control volume x in "
+                     f"[{region[0]:g}, {region[1]:g}]")
         hidden = node_sagitta(t)
         if hidden > scene.contact.overlap_target * t.equivalent_diameter:
             need = sp.nodes
             while need < 100000 and node_sagitta(species_shape(sp.replace(nodes=need))) > \
                     scene.contact.overlap_target * t.equivalent_diameter:
                 need *= 2
-            bad(f"{key}.nodes", f"{sp.nodes} surface nodes leave up to {hidden:.3g} "
-                f"({hidden / t.equivalent_diameter:.3g} d) of the surface between two nodes, "
-                f"where another body can sink unseen: more than contact.overlap_target "
-                f"({scene.contact.overlap_target:g} d); use about {need} nodes or more")
-        mass = sp.density * t.area * (f.gap if f.gap else 1.0)
-        inertia = mass * t.inertia_per_mass
+            res.bad(f"{key}.nodes", f"{sp.nodes} surface nodes leave up to {hidden:.3g} "
+                    f"({hidden / t.equivalent_diameter:.3g} d) of the surface between two "
+                    f"nodes, where another body can sink unseen: more than "
+                    f"contact.overlap_target ({scene.contact.overlap_target:g} d); use about "
+                    f"{need} nodes or more")
+        depth = f.gap if f.gap else 1.0
+        mass = res.derived(f"mass of particles[{k}]", lambda: sp.density * t.area * depth,
+                           f"{key}.density, {_size_keys(k, sp)}, fluid.gap", "kg",
+                           squared=True)
+        inertia = res.derived(f"moment of inertia of particles[{k}]",
+                              lambda: mass * t.inertia_per_mass,
+                              f"{key}.density, {_size_keys(k, sp)}, fluid.gap", "kg m^2")
         ls = t.equivalent_diameter / 40.0 if sp.ls_spacing == "auto" else sp.ls_spacing
         if sp.ls_spacing != "auto" and ls > t.equivalent_diameter / MIN_LS_CELLS_PER_DIAMETER:
-            bad(f"{key}.ls_spacing", f"{ls:g} is too coarse for a particle of d = "
-                f"{t.equivalent_diameter:g}: use at most d/{MIN_LS_CELLS_PER_DIAMETER:g}")
-        values[f"particles.{k}.ls_spacing"] = ls
+            res.bad(f"{key}.ls_spacing", f"{ls:g} is too coarse for a particle of d = "
+                    f"{t.equivalent_diameter:g}: use at most d/{MIN_LS_CELLS_PER_DIAMETER:g}")
         if all_disks:
-            notes[f"particles.{k}.ls_spacing"] = "not used: disks take the analytic path"
-        if sp.xi is not None:
-            xi = float(sp.xi)
-        elif scene.damping.xi == "auto":
-            if f.enabled and f.particle_flux:
-                xi = f.viscosity / (sp.density * (kappa_free + kp))
-                notes["damping.xi"] = ("eta / (rho (H^2/12 + kappa_p)): an isolated particle "
-                                       "carried by the flow drifts at the mean fluid velocity")
-            elif f.enabled:
-                beta = (kappa_free - kp) / (kappa_free + kp)
-                xi = (1.0 + beta) * f.viscosity / (sp.density * kappa_free)
-                notes["damping.xi"] = ("(1 + beta) eta / (rho H^2/12): an isolated particle held "
-                                       "in the pressure solve drifts at the mean fluid velocity")
-            else:
-                xi = 0.0
-                notes["damping.xi"] = "no fluid: no plate drag"
+            res.note(f"particles.{k}.ls_spacing", ls, "not used: disks take the analytic path")
+        elif sp.ls_spacing == "auto":
+            res.note(f"particles.{k}.ls_spacing", ls, "d_eq / 40")
         else:
-            xi = float(scene.damping.xi)
-        species.append(Species(name=sp.name, shape=t, count=count, density=sp.density, mass=mass,
-                               inertia=inertia, d_eq=t.equivalent_diameter, kn=0.0, ks=0.0,
-                               friction=sp.friction, restitution=sp.restitution, xi=xi,
-                               kappa=kp, ls_spacing=ls))
+            res.values[f"particles.{k}.ls_spacing"] = ls
+        xi = _damping(res, scene, sp, kp, kappa_free, k)
+        species.append(Species(name=sp.name, shape=t, count=count, density=sp.density,
+                               mass=mass, inertia=inertia, d_eq=t.equivalent_diameter, kn=0.0,
+                               ks=0.0, friction=sp.friction, restitution=sp.restitution,
+                               xi=xi, kappa=kp, ls_spacing=ls))
     # "auto" depends on each species' density and permeability: record every
     # species' value, and as damping.xi their count-weighted mean (then unused).
     for k, s in enumerate(species):
-        values[f"particles.{k}.xi"] = s.xi
+        res.values[f"particles.{k}.xi"] = s.xi
     if scene.damping.xi == "auto":
         counts = np.array([max(s.count, 1) for s in species], dtype=float)
-        values["damping.xi"] = float(np.average([s.xi for s in species], weights=counts))
-    if problems:
-        raise SceneError(problems)
+        res.values["damping.xi"] = float(np.average([s.xi for s in species], weights=counts))
+    if sum(s.count for s in species) == 0:
+        res.bad("particles", "the scene has no particles (every count is 0)")
+    _check_fit(res, geom, region, scene, species)
+    res.stop_if_bad()
 
-    # Stiffness.
-    for k, (sp, s) in enumerate(zip(scene.particles, species)):
-        if sp.kn == "auto":
-            if not f.enabled:
-                problems.append(f"{src}: particles[{k}].kn: 'auto' needs a driving force, and this "
-                                f"scene has no fluid: give kn in N/m")
-                continue
-            dp, why = _driving_pressure(scene, geom, species)
-            s.kn = dp * s.d_eq * f.gap / (scene.contact.overlap_target * s.d_eq)
-            values[f"particles.{k}.kn"] = s.kn
-            notes[f"particles.{k}.kn"] = (f"driving force {dp * s.d_eq * f.gap:.4g} N ({why}) over "
-                                          f"overlap_target * d_eq")
-        else:
-            s.kn = float(sp.kn)
-        s.ks = s.kn / 2.0 if sp.ks == "auto" else float(sp.ks)
-        if sp.ks == "auto":
-            values[f"particles.{k}.ks"] = s.ks
-    initial = _initial_poses(scene, geom, templates, [s.count for s in species], bad)
-    if problems:
-        raise SceneError(problems)
+    _stiffness(res, scene, geom, species)
+    initial = _initial_poses(scene, geom, templates, [s.count for s in species], res.bad)
+    res.stop_if_bad()
 
-    # Time step.
-    dt_crit = critical_time_step(species, all_disks, scene.contact.normalize_by_nodes)
+    # Time step, and how many steps the run takes.
+    dt_crit = res.derived("critical time step", lambda: critical_time_step(
+        species, all_disks, scene.contact.normalize_by_nodes),
+        "particles.kn (with kn = \"auto\": the driving pressure or flow rate), "
+        "particles.density", "s")
+    res.stop_if_bad()
     if scene.run.dt == "auto":
         dt = scene.run.dt_safety * dt_crit
-        values["run.dt"] = dt
-        notes["run.dt"] = f"{scene.run.dt_safety:g} of the critical step {dt_crit:.4g} s"
+        res.note("run.dt", dt, f"{scene.run.dt_safety:g} of the critical step {dt_crit:.4g} s")
     else:
         dt = float(scene.run.dt)
         if dt > dt_crit and not scene.run.force_dt:
             raise SceneError([f"{src}: run.dt: {dt:g} s is above the critical time step "
                               f"{dt_crit:.4g} s of the stiffest, lightest contact; use "
-                              f"dt <= {scene.run.dt_safety * dt_crit:.4g} s (dt_safety * critical) "
-                              f"or dt = \"auto\""])
+                              f"dt <= {scene.run.dt_safety * dt_crit:.4g} s (dt_safety * "
+                              f"critical) or dt = \"auto\""])
+    _check_steps(res, scene, dt)
+    res.stop_if_bad()
 
-    # Fluid grid.
+    # Memory of everything the run allocates, before any of it is.
+    nx = ny = 0
+    if f.enabled:
+        lx = geom.x_max - geom.x_min
+        nx = max(1, int(math.ceil(lx / fluid_dx - 1e-9)))
+        ny = max(1, int(math.ceil((geom.y_max - geom.y_min) / (lx / nx) - 1e-9)))
+    res.problems += limits.memory_problems(
+        _memory_parts(scene, species, all_disks, wall_h, geom, nx * ny), src, budget)
+    res.stop_if_bad()
+
     model = Model(scene=scene, geometry=geom, wall_field=None, species=species,
                   species_of_particle=np.repeat(np.arange(len(species), dtype=np.int32),
                                                 [s.count for s in species]),
                   all_disks=all_disks, dt=dt, dt_crit=dt_crit, x_escape=x_escape,
                   feed_region=region, feed_inlet=(0.0, 0.0), kappa_free=kappa_free,
-                  initial_poses=initial, notes=notes)
-    if model.n_particles == 0:
-        raise SceneError([f"{src}: particles: the scene has no particles (every count is 0)"])
+                  initial_poses=initial, notes=res.notes)
     inlet = scene.feed.inlet
     if inlet is None:
         inlet = (region[0], min(region[1], region[0] + 2.0 * d_max))
-        values["feed.inlet"] = list(inlet)
+        res.note("feed.inlet", list(inlet), "the first two largest diameters of feed.region")
+    elif scene.feed.mode == "count":
+        _check_feed(res, geom, "feed.inlet", inlet, d_max)
+        res.stop_if_bad()
     model.feed_inlet = tuple(inlet)
     model.wall_field = wl.make_wall_field(geom, wall_h)
     if f.enabled:
-        lx = geom.x_max - geom.x_min
-        nx = max(1, int(math.ceil(lx / fluid_dx - 1e-9)))
-        dx = lx / nx
-        ny = max(1, int(math.ceil((geom.y_max - geom.y_min) / dx - 1e-9)))
-        xc = geom.x_min + (np.arange(nx) + 0.5) * dx
-        yc = geom.y_min + (np.arange(ny) + 0.5) * dx
-        pts = np.stack(np.meshgrid(xc, yc, indexing="ij"), axis=-1).reshape(-1, 2)
-        model.fluid_active = (wl.wall_distance(geom, pts) > 0).reshape(nx, ny)
-        model.fluid_dx = dx
-        model.fluid_shape = (nx, ny)
-        values["fluid.cell_size"] = dx
-        workers = f.workers
-        if workers == "auto":
-            from .fluid.pool import usable_cpus
-            cpus = usable_cpus()
-            workers = max(1, min(cpus, scene.run.realizations))
-            notes["fluid.workers"] = (f"one process per usable CPU ({cpus}), at most one per "
-                                      f"realization ({scene.run.realizations})")
-            values["fluid.workers"] = workers
-        model.fluid_workers = int(workers)  # the solver uses at most one per realization
+        _fluid_grid(res, model, nx, ny)
     model.skin = SKIN_FRACTION * d_min
-    _resolve_stepping(model, arch, values, notes)
+    _resolve_stepping(model, arch, res.values, res.notes)
     if f.enabled:
-        _resolve_intervals(model, values, notes)
-    model.scene = scene.with_values(values)
+        _resolve_intervals(model, res.values, res.notes)
+    model.scene = scene.with_values(res.values)
     return model
+
+
+def _damping(res: _Resolution, scene: Scene, sp, kp: float, kappa_free: float, k: int) -> float:
+    """Global damping of species ``k`` (``damping.xi = "auto"``: the plate drag)."""
+    f = scene.fluid
+    if sp.xi is not None:
+        return float(sp.xi)
+    if scene.damping.xi != "auto":
+        return float(scene.damping.xi)
+    keys = f"particles[{k}].density, fluid.viscosity, fluid.gap"
+    if f.enabled and f.particle_flux:
+        res.notes["damping.xi"] = ("eta / (rho (H^2/12 + kappa_p)): an isolated particle "
+                                   "carried by the flow drifts at the mean fluid velocity")
+        return res.derived(f"damping of particles[{k}]",
+                           lambda: f.viscosity / (sp.density * (kappa_free + kp)), keys, "1/s")
+    if f.enabled:
+        res.notes["damping.xi"] = ("(1 + beta) eta / (rho H^2/12): an isolated particle held "
+                                   "in the pressure solve drifts at the mean fluid velocity")
+        beta = (kappa_free - kp) / (kappa_free + kp)
+        return res.derived(f"damping of particles[{k}]",
+                           lambda: (1.0 + beta) * f.viscosity / (sp.density * kappa_free),
+                           keys, "1/s")
+    res.notes["damping.xi"] = "no fluid: no plate drag"
+    return 0.0
+
+
+def _stiffness(res: _Resolution, scene: Scene, geom, species: list[Species]) -> None:
+    """``kn = "auto"``: the largest driving force over the overlap target; ``ks``
+    half of it."""
+    f = scene.fluid
+    for k, (sp, s) in enumerate(zip(scene.particles, species)):
+        if sp.kn == "auto":
+            if not f.enabled:
+                res.bad(f"particles[{k}].kn", "'auto' needs a driving force, and this scene "
+                        "has no fluid: give kn in N/m")
+                continue
+            dp, why = _driving_pressure(scene, geom, species)
+            drivers = ("fluid.p_in, fluid.p_out" if f.bc == "pressure"
+                       else "fluid.flow_rate, fluid.viscosity")
+            s.kn = res.derived(f"auto contact stiffness of particles[{k}]",
+                               lambda: dp * f.gap / scene.contact.overlap_target,
+                               f"{drivers}, fluid.gap, contact.overlap_target", "N/m",
+                               squared=True)
+            if math.isfinite(s.kn):
+                res.note(f"particles.{k}.kn", s.kn, f"driving force {dp * s.d_eq * f.gap:.4g} "
+                         f"N ({why}) over overlap_target * d_eq")
+        else:
+            s.kn = res.derived(f"contact stiffness of particles[{k}]", lambda: float(sp.kn),
+                               f"particles[{k}].kn", "N/m", squared=True)
+        if sp.ks == "auto":
+            s.ks = s.kn / 2.0
+            if math.isfinite(s.ks):
+                res.note(f"particles.{k}.ks", s.ks, "kn / 2")
+        else:
+            s.ks = float(sp.ks)
+
+
+def _check_fit(res: _Resolution, geom, region, scene: Scene, species: list[Species]) -> None:
+    """Particles given by count must fit in the control volume."""
+    area = wl.fluid_area(geom, max(region[0], geom.x_min), min(region[1], geom.x_max))
+    solid = sum(s.count * s.shape.area for s in species)
+    if area > 0 and solid > MAX_PACKING_FRACTION * area:
+        k = max(range(len(species)), key=lambda i: species[i].count * species[i].shape.area)
+        res.bad(f"particles[{k}].count", f"{sum(s.count for s in species)} particles would "
+                f"cover {solid / area:.3g} of the control volume x in [{region[0]:g}, "
+                f"{region[1]:g}]; at most {MAX_PACKING_FRACTION:g} fits")
+
+
+def _check_steps(res: _Resolution, scene: Scene, dt: float) -> None:
+    """A run must take at least one step and not more than ``limits.MAX_STEPS``."""
+    t_end = scene.run.t_end
+    steps = t_end / dt
+    why = "the auto time step" if scene.run.dt == "auto" else "run.dt"
+    key = "run.dt" if scene.run.dt != "auto" else "run.t_end"
+    if steps < 0.5:
+        res.bad("run.t_end", f"{t_end:g} s is shorter than half a time step ({why} "
+                f"{dt:.3g} s): the run would take no step; raise run.t_end")
+    elif steps > limits.MAX_STEPS:
+        driver = ("" if scene.run.dt != "auto" else
+                  " (the critical step of the stiffest contact: with kn = \"auto\" it "
+                  "follows the driving pressure or flow rate)")
+        res.bad(key, f"{why} {dt:.3g} s{driver} would take {steps:.3g} steps to reach "
+                f"t_end = {t_end:g} s, more than the {limits.MAX_STEPS:.0e} a run can finish; "
+                f"lower run.t_end, or soften the contacts / the driving")
+
+
+def _memory_parts(scene: Scene, species: list[Species], all_disks: bool, wall_h: float,
+                  geom, fluid_cells: int) -> list[Part]:
+    """Every large array a run of ``scene`` allocates, with the key that sizes it."""
+    R = scene.run.realizations
+    n = sum(s.count for s in species)
+    box = (geom.x_min, geom.x_max, geom.y_min, geom.y_max)
+    parts = [_wall_grid_part(scene, box, wall_h),
+             Part("run.realizations" if R > 1 else "particles.count",
+                  f"the state of {R} x {n} bodies", R * n * limits.BODY_BYTES,
+                  "use fewer realizations per run (sweeps and figures batch them) or "
+                  "fewer particles")]
+    nodes = 1 if all_disks else max(len(s.shape.nodes) for s in species)
+    slots = DISK_HISTORY_SLOTS if all_disks else LS_HISTORY_SLOTS
+    parts.append(Part("particles.nodes", f"the shear history of {R} x {n} bodies x {nodes} "
+                      "nodes", R * n * nodes * slots * limits.HISTORY_SLOT_BYTES,
+                      "use fewer surface nodes, realizations or particles"))
+    if not all_disks:
+        for k, s in enumerate(species):
+            per = (2 * s.shape.bounding_radius / s.ls_spacing + 8) ** 2
+            parts.append(Part(f"particles[{k}].ls_spacing", f"the level set of particles[{k}] "
+                              f"({per:.3g} nodes)", per * limits.LEVEL_SET_NODE_BYTES,
+                              "use ls_spacing of d_eq / 40 (\"auto\") or coarser"))
+    if fluid_cells:
+        parts.append(Part("fluid.cell_size", f"the fluid grid ({fluid_cells:.3g} cells)",
+                          fluid_cells * limits.FLUID_CELL_BYTES,
+                          "use a coarser fluid.cell_size (\"auto\": d_eq / 6)"))
+        parts.append(Part("run.realizations" if R > 1 else "fluid.cell_size",
+                          f"the pressure solves of {R} realization(s) on {fluid_cells:.3g} "
+                          "cells", R * fluid_cells * limits.FLUID_CELL_REALIZATION_BYTES,
+                          "use fewer realizations per run or a coarser fluid.cell_size"))
+    return parts
+
+
+def _fluid_grid(res: _Resolution, model: Model, nx: int, ny: int) -> None:
+    """The fluid cells (centres in the fluid are unknowns) and the solver workers."""
+    scene, geom = model.scene, model.geometry
+    f = scene.fluid
+    dx = (geom.x_max - geom.x_min) / nx
+    xc = geom.x_min + (np.arange(nx) + 0.5) * dx
+    yc = geom.y_min + (np.arange(ny) + 0.5) * dx
+    pts = np.stack(np.meshgrid(xc, yc, indexing="ij"), axis=-1).reshape(-1, 2)
+    model.fluid_active = (wl.wall_distance(geom, pts) > 0).reshape(nx, ny)
+    model.fluid_dx = dx
+    model.fluid_shape = (nx, ny)
+    if f.cell_size == "auto":
+        res.note("fluid.cell_size", dx, "smallest particle d_eq / 6, fitted to the channel "
+                 "length")
+    else:
+        res.values["fluid.cell_size"] = dx
+    workers = f.workers
+    if workers == "auto":
+        cpus = usable_cpus()
+        workers = max(1, min(cpus, scene.run.realizations))
+        res.note("fluid.workers", workers, f"one process per usable CPU ({cpus}), at most "
+                 f"one per realization ({scene.run.realizations})")
+    model.fluid_workers = int(workers)  # the solver uses at most one per realization
 
 
 def _resolve_stepping(model: Model, arch: str, values: dict, notes: dict) -> None:

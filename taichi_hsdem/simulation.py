@@ -58,6 +58,7 @@ class Result:
     summary: dict
     series: list = field(default_factory=list)      # (realization, t, escapees)
     final: dict = field(default_factory=dict)       # numpy arrays (R, N, ...)
+    notes: dict = field(default_factory=dict)       # what every "auto" chose, and why
 
     @property
     def ok(self) -> bool:
@@ -131,6 +132,10 @@ class Simulation:
         self.u_ref = None   # per realization: mean speed through the constriction, first solve
         self.e0 = None
         self.history_overflows = 0
+        self.series: list = []          # (realization, t, escapees) rows so far
+        self.next_series = 0.0          # time of the next row
+        self.any_running = True
+        self.interrupted = False
         if place_particles:
             self._place_all()
 
@@ -292,8 +297,13 @@ class Simulation:
             self.u_ref = np.abs(info.flux_out) / self.model.geometry.constriction_width
 
     # ------------------------------------------------------------------ checks
-    def _check(self):
-        """Host-side checks every ``check_every`` steps; returns True while anything runs."""
+    def _check(self, final: bool = False):
+        """Host-side checks every ``check_every`` steps; returns True while anything runs.
+
+        ``final``: the last steps of a run that ends between two checks: only the
+        stability checks, reading without resetting, so that a later :meth:`run`
+        (an extension, or a resumed checkpoint) sees what a run never stopped sees.
+        """
         m = self.model
         sc = self.scene
         lost = int(self.flags[F_HISTORY_OVERFLOW])
@@ -305,7 +315,8 @@ class Simulation:
         escaped = batch.escaped.to_numpy().astype(np.int64)
         bad = batch.bad.to_numpy()
         overlap = batch.max_overlap.to_numpy().astype(float)
-        batch.max_overlap.fill(0)
+        if not final:
+            batch.max_overlap.fill(0)
         st = None
         changed = False
         for r in range(self.R):
@@ -323,7 +334,7 @@ class Simulation:
             elif overlap[r] > sc.contact.overlap_limit:
                 reason = (f"overlap reached {overlap[r]:.3g} of a particle diameter "
                           f"(limit contact.overlap_limit = {sc.contact.overlap_limit:g})")
-            if reason is None and not sc.fluid.enabled:
+            if reason is None and not sc.fluid.enabled and not final:
                 st = st or self.state()
                 ke = self._kinetic_energy(st, r)
                 if self.e0 is None:
@@ -341,7 +352,7 @@ class Simulation:
                 running[r] = 0
                 changed = True
                 continue
-            if res.clogged:
+            if res.clogged or final:
                 continue            # stop_at_clog = false: the stream goes on, the result is kept
             if escaped[r] > self.escaped_np[r]:
                 self.escaped_np[r] = escaped[r]
@@ -358,7 +369,7 @@ class Simulation:
                         changed = True
         if changed:
             batch.running.from_numpy(running.astype(np.int32))
-        if sc.feed.mode == "count":
+        if sc.feed.mode == "count" and not final:
             self._feed(running)
         return bool(running.any())
 
@@ -433,21 +444,35 @@ class Simulation:
                 self.fluid.apply_forces(b, self.batch, self.particles, self.templates)
 
     # ------------------------------------------------------------------ run
-    def run(self, progress=None, on_frame=None, frame_times=None) -> Result:
+    def run(self, progress=None, on_frame=None, frame_times=None, stop=None,
+            on_chunk=None) -> Result:
         """Run to ``run.t_end`` or until every realization stopped.
 
         ``progress(t, t_end)`` is called after every check; ``on_frame(sim)`` at each
-        time of ``frame_times`` (the first at t = 0, before any step).
+        time of ``frame_times`` (the first at t = 0, before any step) not yet
+        passed; ``stop()``, when given, is asked between chunks of steps and ends
+        the run early when it returns True (the realizations still running are
+        then ``"interrupted"``); ``on_chunk(sim)`` is called after every chunk (a
+        checkpoint hook). Calling ``run`` again after a later ``run.t_end`` was set
+        (:meth:`extend`) goes on from where the last call stopped.
+
+        Host checks (escapes, clogs, feeding, stability) run every
+        ``check_every`` steps counted from step 0 and the pressure every
+        ``fluid.update_interval`` steps: neither depends on the frames, the series
+        rows, ``t_end`` or where a run was stopped and resumed, so a run resumed
+        from a checkpoint, or extended to a later ``t_end``, gives the bits of one
+        never stopped.
         """
         sc = self.scene
         t_end = sc.run.t_end
         wall0 = time.perf_counter()
         series_dt = sc.output.series_interval
-        next_series = 0.0
-        series = []
-        frames = list(frame_times) if frame_times is not None else []
+        frames = [t for t in (frame_times or ()) if t > self.t - 0.5 * self.dt] \
+            if self.steps else list(frame_times or ())
         fluid_every = sc.fluid.update_interval if self.fluid is not None else None
-        running = True
+        n_end = int(math.ceil(t_end / self.dt - 0.5))
+        every = self.check_every
+        self.interrupted = False
         if self.fluid is not None and self.u_ref is None:
             self.update_fluid(force=True)
         while True:
@@ -455,61 +480,86 @@ class Simulation:
                 frames.pop(0)
                 if on_frame is not None:
                     on_frame(self)
-            if self.t >= next_series - 0.5 * self.dt:
+            if self.t >= self.next_series - 0.5 * self.dt:
                 run_np = self.batch.running.to_numpy()
                 esc = self.batch.escaped.to_numpy()
                 for r in range(self.R):
                     if run_np[r]:
-                        series.append((r, self.t, int(esc[r])))
-                next_series += series_dt
-            if not running or self.t >= t_end - 0.5 * self.dt:
+                        self.series.append((r, self.t, int(esc[r])))
+                self.next_series += series_dt
+            if not self.any_running or self.steps >= n_end:
                 break
-            n = min(self.check_every, int(math.ceil((t_end - self.t) / self.dt - 0.5)))
+            if stop is not None and stop():
+                self.interrupted = True
+                break
+            n = min((self.steps // every + 1) * every, n_end) - self.steps
             if fluid_every is not None:
                 n = min(n, fluid_every - self.steps % fluid_every)
             if frames:
                 n = min(n, max(1, int(math.ceil((frames[0] - self.t) / self.dt - 0.5))))
-            n = min(n, max(1, int(math.ceil((next_series - self.t) / self.dt - 0.5))))
+            n = min(n, max(1, int(math.ceil((self.next_series - self.t) / self.dt - 0.5))))
             self.step(max(n, 1))
             if fluid_every is not None and self.steps % fluid_every == 0:
                 self.update_fluid()
-            running = self._check()
-            if progress is not None:
-                progress(self.t, t_end)
-        while frames and on_frame is not None:
-            frames.pop(0)
-            on_frame(self)
-        wall = time.perf_counter() - wall0
-        # realizations still running at the end: record where they stopped
+            if self.steps % every == 0:
+                self.any_running = self._check()
+                if progress is not None:
+                    progress(self.t, t_end)
+            if on_chunk is not None:
+                on_chunk(self)
+        if self.steps % every:
+            self.any_running = self._check(final=True)
+        if not self.interrupted:
+            while frames and on_frame is not None:
+                frames.pop(0)
+                on_frame(self)
+        return self._result(time.perf_counter() - wall0)
+
+    def extend(self, t_end: float):
+        """Set a later ``run.t_end`` (checked like the scene's), so that the next
+        :meth:`run` goes on to it."""
+        self.scene = self.scene.with_values({"run.t_end": float(t_end)})
+        self.model.scene = self.scene
+
+    def _result(self, wall) -> Result:
+        """The run's results so far. Realizations still running are reported as
+        stopped now (``t_stop``; ``"interrupted"`` when :meth:`run` was stopped
+        early), without changing them, so that a later :meth:`run` goes on."""
+        sc = self.scene
         esc = self.batch.escaped.to_numpy()
+        series = list(self.series)
         last_t = {r: t for r, t, _ in series}
+        real = []
         for r, res in enumerate(self.results):
+            row = {"seed": res.seed, "escapees": res.escapees, "clogged": res.clogged,
+                   "t_clog": res.t_clog, "status": res.status, "reason": res.reason,
+                   "t_stop": res.t_stop}
             if res.status == "ok" and res.t_stop is None:
-                res.t_stop = self.t
+                row["t_stop"] = self.t
                 if not res.clogged:
-                    res.escapees = int(esc[r])
+                    row["escapees"] = int(esc[r])
+                if self.interrupted:
+                    row["status"] = "interrupted"
                 if last_t.get(r) != self.t:
                     series.append((r, self.t, int(esc[r])))
-        return self._result(wall, series)
-
-    def _result(self, wall, series) -> Result:
-        sc = self.scene
-        ok = [r for r in self.results if r.status == "ok"]
-        real = []
-        for r in self.results:
-            real.append({"seed": r.seed, "escapees": r.escapees, "clogged": r.clogged,
-                         "t_clog": r.t_clog, "status": r.status, "reason": r.reason,
-                         "t_stop": r.t_stop})
+            real.append(row)
+        counted = [r for r in real if r["status"] in ("ok", "interrupted")]
+        n_unstable = sum(1 for r in real if r["status"] == "unstable")
+        statistics = (stats.summarize([r["escapees"] for r in counted],
+                                      [bool(r["clogged"]) for r in counted],
+                                      n_unstable=n_unstable) if counted else None)
         st = self.state()
         summary = {
             "scene": sc.source, "version": __version__, "arch": self.arch,
-            "dt": self.dt, "steps": self.steps, "t_end": sc.run.t_end,
+            "status": "interrupted" if self.interrupted else "complete",
+            "dt": self.dt, "steps": self.steps, "t_end": sc.run.t_end, "t_reached": self.t,
             "wall_time_s": wall,
             "realizations": real,
-            "mean_escapees": float(np.mean([r.escapees for r in ok])) if ok else None,
-            # censoring-aware clogging statistics over the stable realizations
-            "statistics": (stats.summarize([r.escapees for r in ok], [bool(r.clogged) for r in ok])
-                           if ok else None),
+            # the censoring-aware estimate of <s> (stats.summarize), not the plain mean
+            "mean_escapees": None if statistics is None else statistics["mean_escapees"],
+            "mean_escapees_ci": None if statistics is None else statistics["mean_escapees_ci"],
+            "never_clogged": None if statistics is None else statistics["n_never_clogged"],
+            "statistics": statistics,
             "fluid": None if self.fluid is None else self.fluid.summary(),
             "neighbor_builds": self.neighbors.builds + (int(self.builds.to_numpy().sum())
                                                         if self.fused else 0),
@@ -521,4 +571,5 @@ class Simulation:
                  "alive": st["alive"][r].tolist(), "species": st["species"].tolist()}
                 for r in range(self.R)],
         }
-        return Result(scene=sc, summary=summary, series=series, final=st)
+        return Result(scene=sc, summary=summary, series=series, final=st,
+                      notes=dict(self.model.notes))

@@ -406,7 +406,7 @@ def test_straight_channel_flux_through_the_simulation():
 # speed v the feeder, which keeps N in the domain, then carries the areal
 # fraction phi_N = N (pi d^2/4) / (W L_path) and the escapee rate is
 # J = N / T_cycle, T_cycle = L_path / v + the time an escaped particle waits,
-# parked, for the next host check (half a check chunk on average).
+# parked, for the next host check (half a check interval on average).
 # The paper's s(t) = 4 phi Q t / (H pi d^2) is the same rate with v = Q / (H W),
 # the mean velocity of the suspension.
 ESC_U = 1.0                     # Q / (H W)
@@ -443,7 +443,11 @@ def run_escapes(phi, t_end, realizations, t_skip=2.0, seed=0, particle_flux=True
             for r in range(s.R):
                 speeds.append(st["v"][r][st["alive"][r]][:, 0].mean())
 
-    res = sim.run(on_frame=frame, frame_times=list(np.arange(0.0, t_end + 1e-9, 0.5)))
+    # frames on the host checks' grid (every check_every steps), right after the
+    # check that re-inserts the escaped
+    every = sim.check_every * sim.dt
+    res = sim.run(on_frame=frame, frame_times=list(np.arange(0.0, t_end + 1e-9, every * max(
+        1, round(0.5 / every)))))
     assert res.ok, res.summary["realizations"]
     series = np.array([(r, t, e) for r, t, e in res.series])
     escapes = span = 0.0
@@ -451,7 +455,7 @@ def run_escapes(phi, t_end, realizations, t_skip=2.0, seed=0, particle_flux=True
         s = series[(series[:, 0] == r) & (series[:, 1] >= t_skip - 1e-9)]
         escapes += s[-1, 2] - s[0, 2]
         span += s[-1, 1] - s[0, 1]
-    chunk = min(sim.check_every, int(sim.scene.fluid.update_interval))
+    chunk = sim.check_every
     return {"rate": escapes / span, "escapes": escapes, "v": float(np.mean(speeds)),
             "N": sim.N, "alive": np.array(alive_counts), "park": 0.5 * chunk * sim.dt,
             "series": series, "sim": sim}

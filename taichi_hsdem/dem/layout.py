@@ -1,5 +1,6 @@
-"""What the integers in the kernels' shared arrays mean: flag bits, counter slots
-and table columns, in one place for the kernels and the host.
+"""What the integers in the kernels' shared arrays mean: flag bits, counter slots,
+table columns and capacities, in one place for the kernels and the host (plain
+constants: the host imports this module without loading Taichi).
 
 * ``Batch.bad[r]``: bits a kernel sets when realization ``r`` can no longer be
   trusted (the host stops it and reports why).
@@ -26,6 +27,12 @@ PAIR_KN, PAIR_KS, PAIR_MU, PAIR_CE = 0, 1, 2, 3
 N_PAIR = 4
 
 SAMPLING = {"bilinear": 0, "cell": 1}
+
+# Contacts whose shear one surface node (level-set path) or one disk (analytic
+# path) can remember at once; a contact beyond them keeps its force and loses its
+# history (counted in flags[F_HISTORY_OVERFLOW]).
+LS_HISTORY_SLOTS = 3
+DISK_HISTORY_SLOTS = 8
 
 # A level set's value outside its grid: far from the body, no contact.
 OUTSIDE = 1.0e30

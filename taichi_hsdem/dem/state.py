@@ -27,9 +27,8 @@ from ..geometry import levelset
 from ..geometry import shapes as shp
 from ..resolve import pair_table, wall_table
 from . import layout
+from .layout import DISK_HISTORY_SLOTS, LS_HISTORY_SLOTS
 
-LS_HISTORY_SLOTS = 3          # contacts one surface node can remember at once
-DISK_HISTORY_SLOTS = 8        # contacts one disk can remember at once
 
 
 def array(data, dtype=None):

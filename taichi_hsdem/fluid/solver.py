@@ -241,6 +241,7 @@ class PressureSolver(FiniteVolumeSystem):
         self._stats = {"solves": 0, "rebuilds": 0, "setup_seconds": 0.0,
                        "solve_seconds": 0.0,
                        "init_seconds": time.perf_counter() - t_start}
+        self._restored = {}   # realization -> ops that rebuild its hierarchy (see restore)
 
     # ------------------------------------------------------------------ set-up
 
@@ -330,7 +331,11 @@ class PressureSolver(FiniteVolumeSystem):
         if carried is not None:
             rhs = rhs + self._carried_source(carried, occupied)
             rhs[self._pinned] = 0.0
-        x, its, res = self._solve_all(self._hierarchy_ops(changed), rhs, guess)
+        ops = self._hierarchy_ops(changed)
+        for r, before in self._restored.items():     # hierarchies as at the checkpoint
+            ops[r] = before + ops.get(r, [])
+        x, its, res = self._solve_all(ops, rhs, guess)
+        self._restored = {}
         iterations, residual = int(its.max(initial=0)), float(res.max(initial=0.0))
         bnorm = np.linalg.norm(rhs, axis=1)
         self._last = x
@@ -421,6 +426,34 @@ class PressureSolver(FiniteVolumeSystem):
             x[rows], its[rows], res[rows] = xw, itw, rw
         self._stats["setup_seconds"] += max(reply[3] for reply in replies)
         return x, its, res
+
+    # What a later solve depends on: the matrices and right-hand sides filled in so
+    # far, the matrix each hierarchy was coarsened from and its refreshes since, and
+    # the last solution (the next solve's initial guess).
+    _STATE = ("_kappa_seen", "_data", "_rhs", "_pinned", "_blocked", "_share", "_last",
+              "_base", "_since")
+
+    def state(self) -> dict:
+        """Arrays that make a solver of the same grid continue exactly as this one
+        (:meth:`restore`): the next solve gives the same bits."""
+        return {name: getattr(self, name).copy() for name in self._STATE}
+
+    def restore(self, state: dict):
+        """Continue from :meth:`state`. The hierarchies are rebuilt from the kept
+        matrices at the next solve (the same coarsening and operators, so the same
+        solve), here or in the workers, which are told nothing is known."""
+        for name in self._STATE:
+            value = np.asarray(state[name])
+            if value.shape != getattr(self, name).shape:
+                raise ValueError(f"solver state {name} has shape {value.shape}, expected "
+                                 f"{getattr(self, name).shape} (another grid or batch)")
+            setattr(self, name, value.astype(getattr(self, name).dtype, copy=True))
+        self.close()                        # forget what this process and the workers hold
+        self._finalizer = weakref.finalize(self, _release, self._token)
+        self._finalizer.atexit = False
+        self._pattern_at = set()
+        self._restored = {r: self._recreate_ops(r) for r in range(self.n_batch)
+                          if self._since[r] >= 0}
 
     def _pattern(self):
         return (self._n, self._indptr, self._indices)

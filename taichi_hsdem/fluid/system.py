@@ -226,7 +226,7 @@ class FiniteVolumeSystem:
         rhs = np.bincount((offset + self._dc).ravel(), (Td * self._dv).ravel(),
                           m * n).reshape(m, n)
         if self.inflow != 0.0:
-            total = weight.sum(axis=1, keepdims=True)
+            total = _row_sums(weight)[:, None]
             share = np.divide(self.inflow * weight, total, out=np.zeros_like(weight),
                               where=total > 0)
             rhs[:, self._ic] += share
@@ -281,9 +281,9 @@ class FiniteVolumeSystem:
         """Sums of the inward and outward boundary-face fluxes per realization."""
         inward = self._dg * kappa[:, self._dc] / self.viscosity * (self._dv - x[:, self._dc])
         inward[self._pinned[:, self._dc]] = 0.0
-        inflow = self._share.sum(axis=1)
-        flux_in = np.clip(inward, 0.0, None).sum(axis=1) + np.clip(inflow, 0.0, None)
-        flux_out = np.clip(-inward, 0.0, None).sum(axis=1) + np.clip(-inflow, 0.0, None)
+        inflow = _row_sums(self._share)
+        flux_in = _row_sums(np.clip(inward, 0.0, None)) + np.clip(inflow, 0.0, None)
+        flux_out = _row_sums(np.clip(-inward, 0.0, None)) + np.clip(-inflow, 0.0, None)
         return flux_in, flux_out
 
     def velocity(self, pressure, kappa):
@@ -337,7 +337,7 @@ class FiniteVolumeSystem:
                                   0.0)
         if self.inflow != 0.0:
             weight = k[:, 0]  # zero where the inlet cell has no pressure
-            total = weight.sum(axis=1, keepdims=True)
+            total = _row_sums(weight)[:, None]
             ux_face[:, 0] = np.divide(self.inflow * weight, total * dy,
                                       out=np.zeros_like(weight), where=total > 0)
 
@@ -356,6 +356,14 @@ class FiniteVolumeSystem:
         ux = np.where(has_p, 0.5 * (ux_face[:, :-1] + ux_face[:, 1:]), 0.0)
         uy = np.where(has_p, 0.5 * (uy_face[:, :, :-1] + uy_face[:, :, 1:]), 0.0)
         return (ux[0], uy[0]) if single else (ux, uy)
+
+
+def _row_sums(a: np.ndarray) -> np.ndarray:
+    """The sum of each row, added in the same order whatever the batch: numpy sums a
+    C-ordered row pairwise but accumulates a Fortran-ordered array (which taking
+    columns ``a[:, cells]`` of a batch gives) column by column, so a realization
+    solved in a batch would round otherwise than solved alone."""
+    return np.ascontiguousarray(a).sum(axis=1)
 
 
 def _require(bc, keys, kind):

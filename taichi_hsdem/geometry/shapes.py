@@ -284,6 +284,15 @@ def polygon(vertices, n_nodes=40) -> Shape:
 # ---------------------------------------------------------------------------
 
 
+def outline_polygon(shape, circle_segments: int = 32) -> np.ndarray:
+    """The outline to draw a template with: its vertices, or for a circle a regular
+    polygon of ``circle_segments`` vertices (body frame, counter-clockwise)."""
+    if shape.kind == "circle":
+        a = 2.0 * np.pi * np.arange(circle_segments) / circle_segments
+        return shape.radius * np.column_stack([np.cos(a), np.sin(a)])
+    return np.asarray(shape.vertices, dtype=np.float64)
+
+
 def boundary_vectors(nodes: np.ndarray) -> np.ndarray:
     """Outward boundary vectors ``a_k`` (length times normal) of a closed CCW node
     loop: half the chord between a node's two neighbours, turned outwards.

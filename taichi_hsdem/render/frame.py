@@ -26,6 +26,7 @@ import taichi as ti
 from taichi.lang import impl
 
 from ..geometry.polygon import signed_area, triangle_areas, triangulate
+from ..geometry.shapes import outline_polygon
 from .font import GLYPH_H, even, format_time, stamp, text_mask
 from .window import (acquire_window, close_window, ensure_taichi, taichi_logging_at_least,
                      vulkan_status)
@@ -101,13 +102,6 @@ def _lut_index(s):
 # ---------------------------------------------------------------------------
 # Geometry helpers (host, once per renderer)
 
-def _template_outline(shape):
-    if shape.kind == "circle":
-        a = 2.0 * np.pi * np.arange(_CIRCLE_SEGMENTS) / _CIRCLE_SEGMENTS
-        return shape.radius * np.column_stack([np.cos(a), np.sin(a)])
-    return np.asarray(shape.vertices, dtype=np.float64)
-
-
 def _inset(outline, width):
     """The CCW ``outline`` moved ``width`` inwards: each vertex slides along its
     bisector to the point ``width`` from both adjacent edge lines (the miter
@@ -130,7 +124,7 @@ def _template_block(shape, outline_width):
     ``theta = 0`` so that its rotation shows. On a particle too small for the
     rim the width is halved until the inset triangles keep their orientation.
     """
-    outline = _template_outline(shape)
+    outline = outline_polygon(shape, _CIRCLE_SEGMENTS)
     if signed_area(outline) < 0:
         outline = outline[::-1]
     triangles = triangulate(outline)

@@ -99,24 +99,24 @@ class RunConfig(Config):
 
     t_end: float = keyfield("float", "physical time to simulate, s", required=True, gt=0)
     dt: float | str = keyfield("float", 'DEM time step, s, or "auto" (dt_safety times the '
-                           "critical step 2 sqrt(m_eff/kn))", AUTO, auto=True, gt=0)
+                              "critical step 2 sqrt(m_eff/kn))", AUTO, auto=True, gt=0)
     dt_safety: float = keyfield("float", 'fraction of the critical step that dt = "auto" '
-                            "uses, dimensionless", 0.15, gt=0, le=1)
+                               "uses, dimensionless", 0.15, gt=0, le=1)
     realizations: int = keyfield("int", "independent random realizations run together",
-                             1, ge=1)
+                                1, ge=1)
     seed: int = keyfield("int", "seed of realization 0; realization k uses seed + k", 0,
-                     ge=0)
+                        ge=0)
     arch: str = keyfield("choice", "Taichi backend (auto: a GPU when present)", "cpu",
-                     choices=("cpu", "gpu", "auto"))
+                        choices=("cpu", "gpu", "auto"))
     precision: str = keyfield("choice", "floating point type of the kernels", "f64",
-                          choices=("f64", "f32"))
+                             choices=("f64", "f32"))
     stepping: str = keyfield("choice", '"fused": many DEM steps per kernel launch, one '
-                         'realization per thread (disks only); "per_step": three launches '
-                         'per step, bodies in parallel; "auto": fused for disks on the CPU',
-                         AUTO, choices=("auto", "fused", "per_step"))
+                            'realization per thread (disks only); "per_step": three launches '
+                            'per step, bodies in parallel; "auto": fused for disks on the CPU',
+                            AUTO, choices=("auto", "fused", "per_step"))
     stop_at_clog: bool = keyfield("bool", "stop a realization once it has clogged", True)
     force_dt: bool = keyfield("bool", "accept a dt above the critical step (stability "
-                          "studies); the run is then watched and reported unstable", False)
+                             "studies); the run is then watched and reported unstable", False)
 
 
 @document
@@ -127,36 +127,36 @@ class FluidConfig(Config):
     enabled: bool = keyfield("bool", "false: no pressure solve, no fluid force", True)
     viscosity: float | None = keyfield("float", "eta, Pa s (required while enabled)", gt=0)
     gap: float = keyfield("float", "H, plate spacing and particle thickness, m",
-                      required=True, gt=0)
+                         required=True, gt=0)
     cell_size: float | str = keyfield("float", 'fluid cell edge, m; "auto": smallest '
-                                  "particle d_eq / 6", AUTO, auto=True, gt=0)
+                                     "particle d_eq / 6", AUTO, auto=True, gt=0)
     bc: str = keyfield("choice", '"pressure": p_in and p_out; "flow_rate": flow_rate in, '
-                   "p_out out", "pressure", choices=("pressure", "flow_rate"))
+                      "p_out out", "pressure", choices=("pressure", "flow_rate"))
     p_in: float | None = keyfield("float", 'inlet pressure, Pa (required for bc = "pressure")')
     p_out: float = keyfield("float", "outlet pressure, Pa", 0.0)
     flow_rate: float | None = keyfield("float", "Q through the whole gap, m^3/s (required "
-                                   'for bc = "flow_rate")', gt=0)
+                                      'for bc = "flow_rate")', gt=0)
     update_interval: int | str = keyfield("int", 'DEM steps between pressure solves, or "auto" '
-                                      "(the fastest expected particle crosses half a fluid "
-                                      "cell between solves)", AUTO, auto=True, ge=1)
+                                         "(the fastest expected particle crosses half a fluid "
+                                         "cell between solves)", AUTO, auto=True, ge=1)
     resolve_fraction: float = keyfield("float", "re-solve only if more than this fraction "
-                                   "of cells changed permeability (0: always), "
-                                   "dimensionless", 0.0, ge=0, lt=1)
+                                      "of cells changed permeability (0: always), "
+                                      "dimensionless", 0.0, ge=0, lt=1)
     solver_tol: float = keyfield("float", "relative residual of the multigrid solve, "
-                             "dimensionless", 1e-8, gt=0, le=1e-2)
+                                "dimensionless", 1e-8, gt=0, le=1e-2)
     workers: int | str = keyfield("int", "processes that share the realizations' pressure "
-                              'solves; "auto": one per usable CPU, at most one per '
-                              "realization (the answer does not depend on it)", AUTO,
-                              auto=True, ge=1)
+                                 'solves; "auto": one per usable CPU, at most one per '
+                                 "realization (the answer does not depend on it)", AUTO,
+                                 auto=True, ge=1)
     pressure_sampling: str = keyfield("choice", "how a surface node reads the pressure",
-                                  "bilinear", choices=("bilinear", "cell"))
+                                     "bilinear", choices=("bilinear", "cell"))
     particle_flux: bool = keyfield("bool", "conserve the mixture: moving particles carry "
-                               "their volume (div((kappa/eta) grad p) = div(chi v)); false: "
-                               "fluid alone, particles as fixed obstacles (MODEL.md)", False)
+                                  "their volume (div((kappa/eta) grad p) = div(chi v)); false: "
+                                  "fluid alone, particles as fixed obstacles (MODEL.md)", False)
     force_update: str = keyfield("choice", "when the pressure force on the particles is "
-                             "evaluated: at each pressure solve and held in between "
-                             '("solve"), or at every DEM step from the last pressure field '
-                             '("step")', "solve", choices=("solve", "step"))
+                                "evaluated: at each pressure solve and held in between "
+                                '("solve"), or at every DEM step from the last pressure field '
+                                '("step")', "solve", choices=("solve", "step"))
 
 
 _HOURGLASS, _CONVERGING, _POLYGON = ("hourglass",), ("converging",), ("polygon",)
@@ -168,49 +168,49 @@ class GeometryConfig(Config):
     """``[geometry]``: the fluid region; keys of the other kinds are ``None``."""
 
     kind: str = keyfield("choice", "the outline generator", required=True,
-                     choices=("hourglass", "converging", "polygon"))
+                        choices=("hourglass", "converging", "polygon"))
     wall_cell_size: float | str = keyfield("float", 'wall level-set spacing, m; "auto": '
-                                       "smallest d_eq / 10", AUTO, auto=True, gt=0)
+                                          "smallest d_eq / 10", AUTO, auto=True, gt=0)
     escape_offset: float | None = keyfield("float", "escape line distance downstream of "
-                                       "the constriction's exit, m (None: 0.5 max "
-                                       "d_eq, resolved by the run)", ge=0)
+                                          "the constriction's exit, m (None: 0.5 max "
+                                          "d_eq, resolved by the run)", ge=0)
     # kind = "hourglass"
     length: float | None = keyfield("float", "channel length, m", required=True, gt=0,
-                                only=_HOURGLASS)
+                                   only=_HOURGLASS)
     width: float | None = keyfield("float", "channel width, m", required=True, gt=0,
-                               only=_HOURGLASS)
+                                  only=_HOURGLASS)
     neck_width: float | None = keyfield("float", "narrowest width, m, < width",
-                                    required=True, gt=0, only=_HOURGLASS)
+                                       required=True, gt=0, only=_HOURGLASS)
     neck_x: float | None = keyfield("float", "neck position from the inlet, m (default "
-                                "length / 2)", only=_HOURGLASS)
+                                   "length / 2)", only=_HOURGLASS)
     taper_length: float | None = keyfield("float", "length over which each side narrows, "
-                                      "m (default width)", gt=0, only=_HOURGLASS)
+                                         "m (default width)", gt=0, only=_HOURGLASS)
     # kind = "converging"
     width_in: float | None = keyfield("float", "upstream channel width, m", required=True,
-                                  gt=0, only=_CONVERGING)
+                                     gt=0, only=_CONVERGING)
     length_in: float | None = keyfield("float", "upstream straight length, m",
-                                   required=True, gt=0, only=_CONVERGING)
+                                      required=True, gt=0, only=_CONVERGING)
     angle: float | None = keyfield("float", "convergence half-angle, degrees", 45.0, gt=0,
-                               le=90, only=_CONVERGING)
+                                  le=90, only=_CONVERGING)
     constriction_width: float | None = keyfield("float", "W, m, < width_in", required=True,
-                                            gt=0, only=_CONVERGING)
+                                               gt=0, only=_CONVERGING)
     constriction_length: float | None = keyfield("float", "straight constriction length, "
-                                             "m", 0.0, ge=0, only=_CONVERGING)
+                                                "m", 0.0, ge=0, only=_CONVERGING)
     width_out: float | None = keyfield("float", "outlet channel width, m, >= "
-                                   "constriction_width (default width_in)", gt=0,
-                                   only=_CONVERGING)
+                                      "constriction_width (default width_in)", gt=0,
+                                      only=_CONVERGING)
     length_out: float | None = keyfield("float", "outlet channel length, m", required=True,
-                                    gt=0, only=_CONVERGING)
+                                       gt=0, only=_CONVERGING)
     # kind = "polygon"
     outline: tuple[tuple[float, float], ...] | None = keyfield(
-        "points", "the fluid region, a simple polygon of [x, y] vertices, m",
-        required=True, min_len=3, only=_POLYGON)
+           "points", "the fluid region, a simple polygon of [x, y] vertices, m",
+           required=True, min_len=3, only=_POLYGON)
     obstacles: tuple[tuple[tuple[float, float], ...], ...] | None = keyfield(
-        "polygons", "solid islands inside the outline, polygons of [x, y], m", (),
-        only=_POLYGON)
+           "polygons", "solid islands inside the outline, polygons of [x, y], m", (),
+           only=_POLYGON)
     constriction_x: float | None = keyfield("float", "where escape is measured from, m "
-                                        "(None: x of the narrowest section, resolved "
-                                        "by the run)", only=_POLYGON)
+                                           "(None: x of the narrowest section, resolved "
+                                           "by the run)", only=_POLYGON)
 
 
 _ROUND, _SQUARE, _RECT, _REGULAR = (("circle", "regular_polygon"), ("square",),
@@ -224,47 +224,47 @@ class SpeciesConfig(Config):
 
     name: str = keyfield("str", 'label (default "species<k>")')
     shape: str = keyfield("choice", "particle outline", required=True,
-                      choices=("circle", "square", "rectangle", "regular_polygon",
-                               "polygon"))
+                         choices=("circle", "square", "rectangle", "regular_polygon",
+                                  "polygon"))
     diameter: float | None = keyfield("float", "circle diameter, or circumscribed diameter "
-                                  "of a regular polygon, m", required=True, gt=0,
-                                  only=_ROUND)
+                                     "of a regular polygon, m", required=True, gt=0,
+                                     only=_ROUND)
     side: float | None = keyfield("float", "square side, m", required=True, gt=0,
-                              only=_SQUARE)
+                                 only=_SQUARE)
     width: float | None = keyfield("float", "rectangle width, m", required=True, gt=0,
-                               only=_RECT)
+                                  only=_RECT)
     height: float | None = keyfield("float", "rectangle height, m", required=True, gt=0,
-                                only=_RECT)
+                                   only=_RECT)
     n_vertices: int | None = keyfield("int", "vertices of a regular polygon", required=True,
-                                  ge=3, only=_REGULAR)
+                                     ge=3, only=_REGULAR)
     vertices: tuple[tuple[float, float], ...] | None = keyfield(
-        "points", "body-frame outline [x, y] (recentred on its centroid by the run), m",
-        required=True, min_len=3, only=("polygon",))
+           "points", "body-frame outline [x, y] (recentred on its centroid by the run), m",
+           required=True, min_len=3, only=("polygon",))
     count: int | None = keyfield("int", "particles in the control volume (or "
-                             "packing_fraction, or positions)", ge=0)
+                                "packing_fraction, or positions)", ge=0)
     positions: tuple[tuple[float, float, float], ...] | None = keyfield(
-        "poses", "initial [x, y] or [x, y, theta] of every particle of this species "
-        "(m, m, rad; theta 0 if left out), instead of a random placement; the same in "
-        "every realization, checked against the walls and each other", min_len=1)
+           "poses", "initial [x, y] or [x, y, theta] of every particle of this species "
+           "(m, m, rad; theta 0 if left out), instead of a random placement; the same in "
+           "every realization, checked against the walls and each other", min_len=1)
     packing_fraction: float | None = keyfield("float", "areal fraction in the control "
-                                          "volume (or count), dimensionless", gt=0,
-                                          lt=MAX_PACKING_FRACTION)
+                                             "volume (or count), dimensionless", gt=0,
+                                             lt=MAX_PACKING_FRACTION)
     density: float = keyfield("float", "kg/m^3", required=True, gt=0)
     kn: float | str = keyfield("float", 'normal stiffness of the prism, N/m; "auto": '
-                           "largest driving force / (overlap_target d_eq)", AUTO,
-                           auto=True, gt=0)
+                              "largest driving force / (overlap_target d_eq)", AUTO,
+                              auto=True, gt=0)
     ks: float | str = keyfield("float", 'tangential stiffness, N/m; "auto": kn / 2', AUTO,
-                           auto=True, ge=0)
+                              auto=True, ge=0)
     friction: float = keyfield("float", "Coulomb coefficient mu, dimensionless", 0.25,
-                           ge=0)
+                              ge=0)
     restitution: float = keyfield("float", "coefficient of restitution e, dimensionless",
-                              0.5, gt=0, le=1)
+                                 0.5, gt=0, le=1)
     nodes: int = keyfield("int", "surface nodes (at least the shape's vertices)", 40, ge=3)
     ls_spacing: float | str = keyfield("float", 'level-set grid spacing, m; "auto": d_eq '
-                                   "/ 40", AUTO, auto=True, gt=0)
+                                      "/ 40", AUTO, auto=True, gt=0)
     xi: float | None = keyfield("float", "global damping of this species, 1/s; unset: "
-                            "damping.xi (the resolved scene records each species' value)",
-                            None, ge=0)
+                               "damping.xi (the resolved scene records each species' value)",
+                               None, ge=0)
 
     def area(self) -> float:
         """Area of the shape, m^2."""
@@ -281,14 +281,14 @@ class ContactConfig(Config):
     """``[contact]``: contact law options."""
 
     normalize_by_nodes: bool = keyfield("bool", "divide a contact's resultant by its "
-                                    "number of nodes in contact (the paper)", True)
+                                       "number of nodes in contact (the paper)", True)
     overlap_target: float = keyfield("float", 'overlap kn = "auto" aims at, fraction of '
-                                 "d_eq", 0.02, gt=0, le=0.2)
+                                    "d_eq", 0.02, gt=0, le=0.2)
     overlap_limit: float = keyfield("float", "deepest overlap before a realization is "
-                                "stopped as unstable, fraction of d_eq", 0.25, gt=0,
-                                lt=1)
+                                   "stopped as unstable, fraction of d_eq", 0.25, gt=0,
+                                   lt=1)
     disk_fast_path: bool = keyfield("bool", "use analytic disk contacts when every particle "
-                                "is a circle (false: level sets for disks too)", True)
+                                   "is a circle (false: level sets for disks too)", True)
 
 
 @document
@@ -297,7 +297,7 @@ class DampingConfig(Config):
     """``[damping]``: global (plate drag) damping."""
 
     xi: float | str = keyfield("float", 'global damping, 1/s; "auto": the plate drag',
-                           AUTO, auto=True, ge=0)
+                              AUTO, auto=True, ge=0)
 
 
 @document
@@ -306,13 +306,13 @@ class FeedConfig(Config):
     """``[feed]``: where particles start and re-enter."""
 
     mode: str = keyfield("choice", "keep the particle count, or let the domain empty",
-                     "count", choices=("count", "none"))
+                        "count", choices=("count", "none"))
     region: tuple[float, float] | None = keyfield("interval", "control volume [x0, x1], m "
-                                              "(None: upstream straight section, "
-                                              "resolved by the run)")
+                                                 "(None: upstream straight section, "
+                                                 "resolved by the run)")
     inlet: tuple[float, float] | None = keyfield("interval", "re-entry strip [x0, x1], m "
-                                             "(None: first 2 max d_eq of region, "
-                                             "resolved by the run)")
+                                                "(None: first 2 max d_eq of region, "
+                                                "resolved by the run)")
 
 
 @document
@@ -321,9 +321,9 @@ class ClogConfig(Config):
     """``[clog]``: the clog criterion."""
 
     window: float = keyfield("float", "time without escape that signals a clog, s "
-                         "(default 0.1 t_end)", gt=0)
+                            "(default 0.1 t_end)", gt=0)
     speed_fraction: float = keyfield("float", "speed threshold near the constriction, "
-                                 "fraction of the mean fluid speed", 0.02, gt=0, lt=1)
+                                    "fraction of the mean fluid speed", 0.02, gt=0, lt=1)
 
 
 @document
@@ -334,13 +334,19 @@ class OutputConfig(Config):
     dir: str = keyfield("str", 'output folder (default "runs/<name>")')
     video: bool = keyfield("bool", "write video.mp4", False)
     video_realization: int = keyfield("int", "which realization the video shows, < "
-                                  "run.realizations", 0, ge=0)
+                                     "run.realizations", 0, ge=0)
     fps: int = keyfield("int", "video frame rate, 1/s", 30, ge=1)
     frames: int = keyfield("int", "frames over t_end (frame 0 is the initial state)", 150,
-                       ge=2)
+                          ge=2)
     width: int = keyfield("int", "video width, pixels, even", 960, ge=64)
     series_interval: float = keyfield("float", "time between rows of escapees.csv, s "
-                                  "(default t_end / 200)", gt=0)
+                                     "(default t_end / 200)", gt=0)
+    vtk: bool = keyfield("bool", "write a ParaView series (series.pvd: particle outlines, "
+                         "pressure and permeability) at the video's frame times", False)
+    checkpoint_every: float = keyfield("float", "wall-clock seconds between checkpoints "
+                                       "(checkpoint.npz, also written at the end and when "
+                                       "interrupted; --resume continues one); 0: only then, s",
+                                       600.0, ge=0)
 
 
 SECTIONS = {"run": RunConfig, "fluid": FluidConfig, "geometry": GeometryConfig,

@@ -88,8 +88,8 @@ class Scene(Config):
     name: str = keyfield("str", "names the default output folder (default: file stem)")
     description: str = keyfield("str", "free text", "")
     units: str = keyfield("choice", 'how numbers are read: SI, or "dimensionless" (same '
-                      "formulas, numbers as given)", "SI",
-                      choices=("SI", "dimensionless"))
+                         "formulas, numbers as given)", "SI",
+                         choices=("SI", "dimensionless"))
     run: RunConfig = field(default_factory=RunConfig)
     fluid: FluidConfig = field(default_factory=FluidConfig)
     geometry: GeometryConfig = field(default_factory=GeometryConfig)
@@ -216,6 +216,10 @@ def _check_geometry(v: dict, out: Problems) -> None:
         if good(width, outlet) and outlet < width:
             out.add("geometry.width_out", f"must be >= geometry.constriction_width "
                     f"({show(width)}), got {show(outlet)}")
+        if v["angle"] == 90 and v["constriction_length"] == 0:
+            out.add("geometry.angle", "90 degrees (a sudden contraction) needs "
+                    "geometry.constriction_length > 0: with no length the constriction is "
+                    "a slit in a wall of no thickness")
     elif kind == "polygon":
         _check_polygon_outline(v, out)
 

@@ -60,6 +60,11 @@ def toml_key(key: str) -> str:
     return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else toml_string(key)
 
 
+def parse_toml(text: str) -> dict:
+    """TOML text as a dict (``tomllib.TOMLDecodeError`` when it is not TOML)."""
+    return tomllib.loads(text)
+
+
 def parse_override_value(text: str) -> Any:
     """A TOML value, or the text itself when it is not one (``flow_rate``)."""
     try:

@@ -1,6 +1,6 @@
 """Studies made of many runs: sweeps (:mod:`.sweep`), calibration (:mod:`.calibrate`)
-and the paper's figures (:mod:`.figures`); :mod:`.digest` keys their kept results
-on the code that made them."""
+and the paper's figures (:mod:`.points`, :mod:`.figures`, :mod:`.plots`); kept
+results are keyed on the code that made them (:mod:`taichi_hsdem.digest`)."""
 
 
 def fmt(value) -> str:

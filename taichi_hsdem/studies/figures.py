@@ -99,7 +99,7 @@ from .. import stats
 from ..laws import theory_escapees
 from ..output import atomic_write, json_safe
 from ..resolve import resolve
-from .digest import code_digest
+from ..digest import code_digest
 from .points import (DEFAULT_POINTS, DEFAULT_REALIZATIONS, FIGURES, PAPER_REALIZATIONS,
                      QUICK_POINTS, SPEC, FigureError, PointRun, base_scene, build_points,
                      load_point, point_file, point_key, run_point, save_point, series_by_seed)

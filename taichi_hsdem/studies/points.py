@@ -17,7 +17,7 @@ from ..geometry.walls import fluid_area
 from ..output import atomic_write, json_safe
 from ..resolve import species_shape
 from ..scene import Scene, load_scene, scene_to_toml
-from .digest import code_digest
+from ..digest import code_digest
 
 
 FIGURES = ("escapees-time", "pmf-collapse", "friction", "shapes", "polygons")

@@ -54,7 +54,7 @@ from ..output import atomic_write
 from ..scene import Scene, SceneError, load_scene, read_toml, scene_to_toml
 from ..scene.toml import toml_value
 from . import fmt
-from .digest import code_digest
+from ..digest import code_digest
 
 __all__ = [
     "SweepError", "Sweep", "load_sweep", "expand_grid", "point_folder", "run_sweep",

@@ -1,0 +1,93 @@
+"""What a run would cost, estimated before anything is allocated: memory against what
+the machine has, and DEM steps against what can finish.
+
+:func:`resolve <taichi_hsdem.resolve.resolve>` adds up the :class:`Part` of every
+grid and array a scene asks for and refuses the scene, naming the key that made
+the largest part, when the total would not fit; a step count that could never
+finish (or no step at all) is refused the same way.
+
+The per-element byte counts are upper estimates of the host and device arrays
+each element owns, temporaries included (measured on the vani and hourglass
+scenes, rounded up); they only need to be right to a factor of two to tell a
+scene that fits from one that needs a thousand times the memory.
+
+Examples
+--------
+>>> human_bytes(3.2e9)
+'3.2 GB'
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+# Bytes per element, host and device together (see the module doc).
+WALL_NODE_BYTES = 64             # wall level set: points, distance, gradient, device copy
+LEVEL_SET_NODE_BYTES = 80        # a template's grid: points, distance, gradient, stacked copy
+FLUID_CELL_BYTES = 100           # the fluid grid itself: active mask, faces, sparsity pattern
+FLUID_CELL_REALIZATION_BYTES = 320   # per realization: matrix, multigrid hierarchy, fields
+BODY_BYTES = 400                 # per body and realization: state, neighbours, host copies
+HISTORY_SLOT_BYTES = 2 * (4 + 16)    # shear history: two buffers of (partner, 2-vector)
+
+#: The largest share of the available memory a run may plan to use.
+MEMORY_FRACTION = 0.8
+#: More DEM steps than this can not finish (the paper's runs take 2e7).
+MAX_STEPS = 1.0e10
+
+
+@dataclass(frozen=True)
+class Part:
+    """One array or grid of a run: which key sets its size, what it is, its bytes,
+    and what to change (a phrase) to make it smaller."""
+    key: str
+    what: str
+    nbytes: float
+    advice: str
+
+
+def available_memory() -> int | None:
+    """Memory this process could still allocate, bytes (Linux ``MemAvailable``,
+    else the free physical pages); None where neither can be read."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def human_bytes(n: float) -> str:
+    """``n`` bytes in kB, MB, GB, ... (decimal), 3 significant digits."""
+    units = ("B", "kB", "MB", "GB", "TB", "PB", "EB")
+    k = 0
+    while n >= 1000 and k < len(units) - 1:
+        n /= 1000.0
+        k += 1
+    return f"{n:.3g} {units[k]}"
+
+
+def memory_problems(parts: list[Part], source: str, available: int | None = None) -> list[str]:
+    """One line naming the largest part when all of ``parts`` would not fit in
+    ``MEMORY_FRACTION`` of the ``available`` memory (default: this machine's), else
+    none.
+
+    Examples
+    --------
+    >>> memory_problems([Part("fluid.cell_size", "a grid", 5e12, "raise it")], "s.toml",
+    ...                 available=16e9)                            # doctest: +ELLIPSIS
+    ['s.toml: fluid.cell_size: a grid would need about 5e+03 GB ...']
+    """
+    available = available_memory() if available is None else available
+    total = sum(p.nbytes for p in parts)
+    if available is None or total <= MEMORY_FRACTION * available:
+        return []
+    big = max(parts, key=lambda p: p.nbytes)
+    share = "" if big.nbytes >= 0.99 * total else f" (of {human_bytes(total)} for the whole run)"
+    return [f"{source}: {big.key}: {big.what} would need about {human_bytes(big.nbytes)}"
+            f"{share}, more than the {human_bytes(available)} of memory available here; "
+            f"{big.advice}"]
