@@ -133,16 +133,19 @@ def check_continuable(header: dict, scene, path) -> None:
     mine = scene.with_values({"run.t_end": 1.0, "output.dir": "-"})
     theirs = load_scene(parse_toml(header["scene"])).with_values(
         {"run.t_end": 1.0, "output.dir": "-"})
-    for section in ("run", "fluid", "geometry", "contact", "damping", "feed", "clog"):
-        a, b = getattr(mine, section).to_dict(), getattr(theirs, section).to_dict()
+    tables = [(section, getattr(mine, section).to_dict(), getattr(theirs, section).to_dict())
+              for section in ("run", "fluid", "geometry", "contact", "damping", "feed", "clog")]
+    if len(mine.particles) != len(theirs.particles):
+        raise CheckpointError(f"{path}: the checkpoint has {len(theirs.particles)} particle "
+                              f"species, this scene {len(mine.particles)}")
+    tables += [(f"particles[{k}]", a.to_dict(), b.to_dict())
+               for k, (a, b) in enumerate(zip(mine.particles, theirs.particles))]
+    for where, a, b in tables:
         for key in sorted(set(a) | set(b)):
             if a.get(key) != b.get(key):
-                raise CheckpointError(f"{path}: {section}.{key} is {b.get(key)!r} in the "
+                raise CheckpointError(f"{path}: {where}.{key} is {b.get(key)!r} in the "
                                       f"checkpoint, {a.get(key)!r} here: only run.t_end and "
                                       "the output keys can change on --resume")
-    if [p.to_dict() for p in mine.particles] != [p.to_dict() for p in theirs.particles]:
-        raise CheckpointError(f"{path}: the particles differ from the checkpoint's: only "
-                              "run.t_end and the output keys can change on --resume")
 
 
 def restore(sim, path) -> dict:

@@ -299,8 +299,13 @@ def _wall_grid_part(scene: Scene, box, wall_h: float) -> Part:
                     f"a half-angle of {g.angle:g} degrees makes the converging section "
                     f"{taper:.3g} long; use a larger angle")
     need = _cell_for(nodes * wall_h ** 2 * limits.WALL_NODE_BYTES)
+    if g.wall_cell_size == "auto":
+        k = min(range(len(scene.particles)), key=lambda i: scene.particles[i].d_eq())
+        what += (f', its spacing "auto": d_eq / 10 of the smallest particle, particles[{k}] '
+                 f"(d_eq {scene.particles[k].d_eq():.3g}),")
     return Part("geometry.wall_cell_size", what, nodes * limits.WALL_NODE_BYTES,
-                f"use geometry.wall_cell_size >= {need:.3g}, or a smaller channel")
+                f"use geometry.wall_cell_size >= {need:.3g}, larger particles, or a "
+                "smaller channel")
 
 
 def _cell_for(area_bytes: float) -> float:
@@ -335,7 +340,12 @@ def resolve(scene: Scene, arch: str = "x64") -> Model:
     # Every derived number is checked (Resolution.derived) and reported in the
     # user's terms: numpy's own overflow warnings would only repeat it on stderr.
     with np.errstate(all="ignore"):
-        return _resolve(scene, arch)
+        try:
+            return _resolve(scene, arch)
+        except ArithmeticError as exc:   # a combination no check above foresaw
+            raise SceneError([f"{scene.source}: the scene's numbers overflow or vanish in "
+                              f"its derived quantities ({exc}); use values of ordinary size "
+                              "(SI, or dimensionless numbers near 1)"]) from None
 
 
 def _resolve(scene: Scene, arch: str) -> Model:

@@ -10,7 +10,7 @@ import math
 import numbers
 from typing import Any, Iterable, Mapping
 
-from .keys import AUTO, SECTIONS, Spec, SpeciesConfig, key_specs
+from .keys import AUTO, MAX_MAGNITUDE, MIN_MAGNITUDE, SECTIONS, Spec, SpeciesConfig, key_specs
 from .toml import toml_value
 
 BAD = object()  # a value already reported as invalid
@@ -171,6 +171,12 @@ def _coerce(value: Any, spec: Spec, key: str, out: Problems) -> Any:
             return BAD
         if not _in_range(number, spec):
             out.add(key, f"must be {_range_text(spec)}, got {show(number)}")
+            return BAD
+        if kind == "float" and number != 0 and not (
+                MIN_MAGNITUDE <= abs(number) <= MAX_MAGNITUDE):
+            out.add(key, f"{show(number)} is outside the magnitudes the simulator computes "
+                         f"with ({MIN_MAGNITUDE:g} to {MAX_MAGNITUDE:g}, or 0); use SI units, "
+                         "or dimensionless numbers of ordinary size")
             return BAD
         return number
     if kind == "bool":

@@ -20,6 +20,9 @@ AUTO = "auto"
 MAX_PACKING_FRACTION = 0.6
 #: Kozeny-Carman inside a particle needs gap > this * d_eq (docs/scene.md, Conventions).
 MIN_GAP_OVER_DEQ = 2.0 / 3.0
+#: Every number of a scene (but 0) lies between these in magnitude: products of a
+#: few of them, as the derived quantities are, then stay finite and normal in f64.
+MIN_MAGNITUDE, MAX_MAGNITUDE = 1e-100, 1e100
 
 
 class SceneError(ValueError):
@@ -99,7 +102,8 @@ class RunConfig(Config):
 
     t_end: float = keyfield("float", "physical time to simulate, s", required=True, gt=0)
     dt: float | str = keyfield("float", 'DEM time step, s, or "auto" (dt_safety times the '
-                              "critical step 2 sqrt(m_eff/kn))", AUTO, auto=True, gt=0)
+                              "critical step 2 / omega_max of the stiffest, lightest normal or tangential "
+                                   "contact mode)", AUTO, auto=True, gt=0)
     dt_safety: float = keyfield("float", 'fraction of the critical step that dt = "auto" '
                                "uses, dimensionless", 0.15, gt=0, le=1)
     realizations: int = keyfield("int", "independent random realizations run together",
@@ -137,7 +141,7 @@ class FluidConfig(Config):
     flow_rate: float | None = keyfield("float", "Q through the whole gap, m^3/s (required "
                                       'for bc = "flow_rate")', gt=0)
     update_interval: int | str = keyfield("int", 'DEM steps between pressure solves, or "auto" '
-                                         "(the fastest expected particle crosses half a fluid "
+                                         "(the fastest expected particle crosses one fluid "
                                          "cell between solves)", AUTO, auto=True, ge=1)
     resolve_fraction: float = keyfield("float", "re-solve only if more than this fraction "
                                       "of cells changed permeability (0: always), "

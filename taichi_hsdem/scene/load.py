@@ -506,6 +506,9 @@ def load_scene(source: str | Path | Mapping[str, Any],
         scene = _build_scene(raw, label, stem, origins)
     except SceneError as error:
         raise SceneError(problems + error.problems) from None
+    except ArithmeticError as exc:      # a combination the checks did not foresee
+        raise SceneError(problems + [f"{label}: the scene's numbers overflow or vanish in "
+                                     f"its checks ({exc}); use values of ordinary size"]) from None
     if problems:
         raise SceneError(problems)
     return scene

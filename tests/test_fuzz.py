@@ -1,0 +1,117 @@
+"""Property: whatever scene keys a user sets, to values inside, at and beyond every
+documented range, or of the wrong type, the command line answers with exit 0, 1
+or 2 and, when not 0, at least one line that is a message, never a traceback,
+and within a bounded time.
+
+The default run tries a few dozen cases (seeded: the same every time); a longer
+fuzzing run: ``HYPOTHESIS_PROFILE=fuzz python -m pytest tests/test_fuzz.py``.
+"""
+import math
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+hypothesis = pytest.importorskip("hypothesis", reason="the test extra brings hypothesis")
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from taichi_hsdem.cli import main  # noqa: E402
+from taichi_hsdem.scene.keys import SECTIONS, SpeciesConfig, key_specs  # noqa: E402
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+BASES = ["hourglass24", "vani_phi026", "squares"]
+# What would only make a valid run long (not wrong): kept small when valid.
+SIZE_KEYS = {"run.realizations": 3, "particles.count": 60, "particles.nodes": 120,
+             "output.frames": 5, "output.fps": 30, "output.width": 256,
+             "particles.n_vertices": 12}
+# Never fuzzed: they draw or write files (covered by their own tests), or their
+# time (run.t_end, set last to a short value; only its invalid values are tried).
+SKIP = {"output.video", "output.vtk", "output.dir", "run.arch", "run.precision",
+        "run.t_end", "output.checkpoint_every", "name"}
+MAX_SECONDS = 120
+
+settings.register_profile("default", max_examples=30, deadline=None, derandomize=True,
+                          suppress_health_check=[HealthCheck.too_slow,
+                                                 HealthCheck.function_scoped_fixture])
+settings.register_profile("fuzz", max_examples=500, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow,
+                                                 HealthCheck.function_scoped_fixture])
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+
+EXTREMES = [0.0, -1.0, 1e-300, 1e300, -1e300, math.inf, -math.inf, math.nan, 5e-324, 1e-30,
+            1e30]
+
+
+def _numbers(spec, key):
+    """Values for a numeric key: inside its range, at its bounds, just beyond, extremes."""
+    bounds = [b for b in (spec.gt, spec.ge, spec.lt, spec.le) if b is not None]
+    near = [b + d for b in bounds for d in (-1e-9, 0.0, 1e-9, -1.0, 1.0)]
+    if key in SIZE_KEYS:
+        near += [1, 2, SIZE_KEYS[key], -5, 10 ** 9]
+        values = st.sampled_from(near)
+    else:
+        values = st.one_of(st.sampled_from(near + EXTREMES),
+                           st.floats(allow_nan=True, allow_infinity=True))
+    if spec.kind == "int":
+        return values.map(lambda v: int(v) if math.isfinite(v) and abs(v) < 1e18 else v)
+    return values
+
+
+def _value(key, spec):
+    """A --set value (TOML text) for ``key``."""
+    wrong = st.sampled_from(['"auto"', '"text"', "true", "[1.0, 2.0]", "[[0.0, 0.0]]",
+                             '"nan"', "{a = 1}", "-0.0"])
+    if spec.kind in ("float", "int"):
+        good = _numbers(spec, key).map(lambda v: repr(float(v)) if isinstance(v, float)
+                                       else str(v))
+        good = good.map(lambda t: {"inf": "inf", "-inf": "-inf", "nan": "nan"}.get(t, t))
+        return st.one_of(good, wrong)
+    if spec.kind == "bool":
+        return st.one_of(st.sampled_from(["true", "false"]), wrong)
+    if spec.kind == "choice":
+        return st.one_of(st.sampled_from([f'"{c}"' for c in spec.choices]), wrong)
+    if spec.kind == "interval":
+        return st.one_of(st.sampled_from(["[-1.0, 0.0]", "[0.0, 1e300]", "[0.001, 0.0005]",
+                                          "[0.0, 0.0028]", "[1e-9, 2e-9]"]), wrong)
+    if spec.kind in ("points", "poses", "polygons"):
+        return st.one_of(st.sampled_from(["[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]",
+                                          "[[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]",
+                                          "[[0.0, 0.0, 0.0]]", "[]"]), wrong)
+    return st.one_of(st.sampled_from(['"x"', '""', '"a/b"']), wrong)
+
+
+def _all_keys():
+    for section, cls in SECTIONS.items():
+        for name, spec in key_specs(cls).items():
+            yield f"{section}.{name}", spec
+    for name, spec in key_specs(SpeciesConfig).items():
+        yield f"particles.{name}", spec
+
+
+KEYS = [(key, spec) for key, spec in _all_keys() if key not in SKIP]
+override = st.sampled_from(KEYS).flatmap(
+    lambda ks: _value(*ks).map(lambda v, k=ks[0]: f"{k}={v}"))
+t_end_bad = st.sampled_from(["run.t_end=0", "run.t_end=-1", "run.t_end=1e-300",
+                             'run.t_end="x"', "run.t_end=nan"])
+
+
+@given(base=st.sampled_from(BASES), sets=st.lists(override, min_size=1, max_size=3),
+       bad_end=st.one_of(st.none(), t_end_bad))
+def test_any_override_gives_an_answer_not_a_traceback(base, sets, bad_end, tmp_path_factory,
+                                                      capsys):
+    out = tmp_path_factory.mktemp("fuzz") / "out"
+    args = [str(SCENES / f"{base}.toml"), "--out", str(out), "--quiet"]
+    for text in sets + ["run.t_end=0.004"] + ([bad_end] if bad_end else []):
+        args += ["--set", text]
+    t0 = time.perf_counter()
+    code = main(args)                        # an exception here is the failure
+    seconds = time.perf_counter() - t0
+    err = capsys.readouterr().err
+    assert code in (0, 1, 2), (code, err)
+    if code != 0:
+        lines = [ln for ln in err.splitlines() if ln.strip()]
+        assert lines, f"exit {code} without a message"
+    assert "Traceback" not in err, err
+    assert seconds < MAX_SECONDS, (seconds, args)
