@@ -65,11 +65,11 @@ def test_pmf_bins_whole_escapees_and_normalisation():
     rng = np.random.default_rng(3)
     s = rng.geometric(0.1, size=400) - 1          # s = 0, 1, 2, ... with <s> = 9
     c = np.ones(s.size, bool)
-    bins = figures.pmf_bins(s, c)
+    bins = stats.pmf_bins(s, c)
     mean = stats.fit_geometric(s, c).mean
     assert mean == pytest.approx(s.mean())
     m = bins[0]["s_hi"] - bins[0]["s_lo"] + 1
-    assert m == round(figures.PMF_BIN_FRACTION * mean)
+    assert m == round(stats.pmf.PMF_BIN_FRACTION * mean)
     assert all(b["s_hi"] - b["s_lo"] + 1 == m for b in bins)   # whole s, equal bins
     assert sum(b["count"] for b in bins) == s.size
     total = sum(b["pmf"] * b["bin_width_x"] for b in bins)
@@ -82,12 +82,12 @@ def test_pmf_bins_keep_censored_in_the_mean():
     # censored realizations are not in the histogram but raise <s> (stats.fit_geometric)
     s = np.array([2, 4, 6, 30, 30])
     c = np.array([True, True, True, False, False])
-    bins = figures.pmf_bins(s, c)
+    bins = stats.pmf_bins(s, c)
     fit = stats.fit_geometric(s, c)
     assert bins[0]["mean_s"] == pytest.approx(fit.mean)
     assert fit.mean > s[c].mean()
     assert sum(b["count"] for b in bins) == 3
-    assert figures.pmf_bins(s, np.zeros(5, bool)) == []      # no clog: undefined
+    assert stats.pmf_bins(s, np.zeros(5, bool)) == []      # no clog: undefined
 
 
 def test_point_stats_handles_censored_and_unstable():
@@ -175,7 +175,7 @@ def test_every_figure_renders(command, tmp_path):
             for i, v in enumerate(vals)]
     rows = [figures._point_row(command, r) for r in runs]
     assert rows[0]["n_clogged"] == 0 and math.isinf(rows[0]["mean_s"])
-    pmfs = [figures.pmf_bins(*r.samples()) for r in runs]
+    pmfs = [stats.pmf_bins(*r.samples()) for r in runs]
     png = tmp_path / f"{command}.png"
     figures.render(command, runs, rows, pmfs, png, "test")
     check_png(png)

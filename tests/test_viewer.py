@@ -51,3 +51,19 @@ def test_view_runs_in_a_real_window(tmp_path):
     video = json.loads((tmp_path / "o" / "summary.json").read_text())["video"]
     assert video["frames"] == 4 and video["file"] is None     # viewed, not recorded
     assert not (tmp_path / "o" / "video.mp4").exists()
+
+
+def test_display_set_but_no_x_server_is_reported(monkeypatch, tmp_path, capsys):
+    # a display number no X server listens on: refused up front, the run goes on
+    monkeypatch.setenv("DISPLAY", ":987")
+    ok, why = display_available()
+    assert not ok and "no X server answers on DISPLAY=:987" in why
+    from taichi_hsdem.cli import main
+    hourglass = str(Path(__file__).resolve().parents[1] / "scenes" / "hourglass24.toml")
+    assert main([hourglass, "--view", "--out", str(tmp_path / "o"), "--set",
+                 "run.t_end=0.1"]) == 0
+    err = capsys.readouterr().err
+    assert "--view skipped: no X server" in err and "Traceback" not in err
+    assert main([hourglass, "--view", "--quiet", "--out", str(tmp_path / "q"), "--set",
+                 "run.t_end=0.1"]) == 0
+    assert "--view" not in capsys.readouterr().err          # --quiet: errors only

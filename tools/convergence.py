@@ -328,7 +328,8 @@ def _point(folder, r):
             "wall_s": r["wall_time_s"],
             "wall_per_sim_s": r["wall_time_s"] / sim_s if sim_s else float("nan"),
             "escapees": [x["escapees"] for x in ok],
-            "clogged": [bool(x["clogged"]) for x in ok]}
+            "clogged": [bool(x["clogged"]) for x in ok],
+            "seeds": [x["seed"] for x in ok]}
 
 
 def _row(label, value, pt):
@@ -407,8 +408,7 @@ def interval_study(out, quick, realizations=None):
         if pt is ref or not pt["escapees"] or not ref["escapees"]:
             diff, lo, hi = (0.0, 0.0, 0.0) if pt is ref else (None, None, None)
         else:
-            diff, (lo, hi) = mean_difference(ref["escapees"], ref["clogged"],
-                                             pt["escapees"], pt["clogged"])
+            diff, (lo, hi) = _paired_difference(ref, pt)
         rows.append([cells, k] + _row(None, None, pt)[2:] + [diff, lo, hi])
     header = (["cells_per_solve", "steps"] + ROW_HEADER
               + ["change_from_half_cell", "change_ci_lo", "change_ci_hi"])
@@ -452,13 +452,22 @@ def interval_study(out, quick, realizations=None):
     return rows, csv_path, out / "interval.png"
 
 
+def _paired_difference(a, b):
+    """``<s>_b - <s>_a`` and its 95 % interval. Points run on the same seeds are
+    paired (one realization each per seed, all stable): the BCa bootstrap resamples
+    the seeds; otherwise the intervals of the two are combined (MOVER)."""
+    from taichi_hsdem.stats import mean_difference
+    paired = len(a["escapees"]) == len(b["escapees"]) and a.get("seeds") == b.get("seeds") \
+        and a.get("seeds") is not None
+    return mean_difference(a["escapees"], a["clogged"], b["escapees"], b["clogged"],
+                           method="bca" if paired else "mover", paired=paired)
+
+
 def _compare_paper(path, auto, paper):
     """The auto defaults against the paper's settings (two :func:`_point` results):
     speed-up and the change in <s> (paper-like minus auto) with its bootstrap
     interval, written to ``path``."""
-    from taichi_hsdem.stats import mean_difference
-    diff, (lo, hi) = mean_difference(auto["escapees"], auto["clogged"],
-                                     paper["escapees"], paper["clogged"])
+    diff, (lo, hi) = _paired_difference(auto, paper)
 
     def part(pt):
         return {"mean_escapees": pt["mean"], "ci": pt["ci"], "realizations": pt["n_ok"],

@@ -2,6 +2,7 @@
 draws one realization of a running simulation into them (:class:`VideoRecorder`)."""
 import math
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -221,7 +222,12 @@ class VideoRecorder:
             self.seconds += time.perf_counter() - t0
         self.frames += 1
         if self.viewer is not None:
-            self.viewer.show(sim, frame)       # outside the timing: it waits for keys
+            try:
+                self.viewer.show(sim, frame)   # outside the timing: it waits for keys
+            except Exception as exc:           # a window that cannot open must not stop the run
+                print(f"--view stopped: the window failed ({type(exc).__name__}: {exc}); "
+                      "the run goes on", file=sys.stderr)
+                self.viewer = None
 
     def summary(self, wall_time_s: float) -> dict:
         """``summary.json``'s ``"video"`` entry; ``wall_time_s`` is the run's

@@ -11,16 +11,33 @@ GGUI window. Frames come at the video's times (``output.frames`` over ``t_end``)
 from __future__ import annotations
 
 import os
+import socket
 from pathlib import Path
 
 import numpy as np
 
 
 def display_available() -> tuple[bool, str]:
-    """Is there a display to open a window on."""
-    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
-        return True, ""
-    return False, "no display (DISPLAY is not set): --view needs a desktop session or Xvfb"
+    """Is there an X server to open a window on (Taichi's GUI is X11): ``DISPLAY``
+    set, and its socket (``:N`` on this machine, ``host:N`` over TCP) answering."""
+    display = os.environ.get("DISPLAY", "")
+    if not display:
+        return False, "no display (DISPLAY is not set): --view needs a desktop session or Xvfb"
+    host, _, rest = display.rpartition(":")
+    number = rest.split(".")[0]
+    if not number.isdigit():
+        return False, f"DISPLAY={display!r} is not an X display name like :0"
+    try:
+        if host in ("", "unix"):
+            with socket.socket(socket.AF_UNIX) as sock:
+                sock.settimeout(2.0)
+                sock.connect(f"/tmp/.X11-unix/X{number}")
+        else:
+            socket.create_connection((host, 6000 + int(number)), timeout=2.0).close()
+    except OSError as exc:
+        return False, (f"no X server answers on DISPLAY={display} ({exc.strerror or exc}): "
+                       "--view needs a running desktop session or Xvfb")
+    return True, ""
 
 
 class LiveViewer:

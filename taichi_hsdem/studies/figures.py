@@ -58,9 +58,11 @@ Statistics
 Every estimate comes from :mod:`taichi_hsdem.stats` over the realizations that ran
 stably: a realization that never clogged is right-censored (its ``s`` is a lower
 bound) and enters the geometric likelihood as such, it is not dropped; ``<s>`` is
-the sample mean with a t interval when every realization clogged and the
-censoring-aware fit otherwise (:func:`taichi_hsdem.stats.mean_escapees`).
-Unstable realizations are counted in ``points.csv`` and left out.
+the censoring-aware fit with its profile-likelihood interval
+(:func:`taichi_hsdem.stats.mean_escapees`). The PMF of ``s/<s>`` is binned on whole
+``s`` and normalised by all realizations (:func:`taichi_hsdem.stats.pmf_bins`), so
+with censoring it integrates to the clogged fraction. Unstable realizations are
+counted in ``points.csv`` and left out.
 
 Sizes
 -----
@@ -106,7 +108,6 @@ from .points import (DEFAULT_POINTS, DEFAULT_REALIZATIONS, FIGURES, PAPER_REALIZ
 from .plots import pyplot, render
 from ..scene import SceneError
 
-PMF_BIN_FRACTION = 0.5          # target PMF bin width in units of <s> (rounded to whole s)
 
 
 # ----------------------------------------------------------------------------- points
@@ -155,43 +156,6 @@ def stream_rate(series, rows) -> dict:
             "n_no_escape": no_escape}
 
 
-def pmf_bins(escapees, clogged, bin_fraction: float = PMF_BIN_FRACTION, max_x=None) -> list[dict]:
-    """PMF of ``x = s/<s>`` over the clogged realizations, on bins of whole ``s``.
-
-    ``<s>`` is the censoring-aware fit mean (:func:`taichi_hsdem.stats.fit_geometric`);
-    each bin holds ``m = max(1, round(bin_fraction * <s>))`` consecutive values of
-    ``s`` (:func:`taichi_hsdem.stats.histogram`), so no bin holds more integers than
-    another. Density in ``x``: ``count / (n_clogged * m / <s>)``, at ``x`` = the
-    bin's mean ``s`` over ``<s>``; standard error binomial. Empty list when
-    ``s/<s>`` is undefined (no clog, or ``<s> = 0``).
-    """
-    s = np.asarray(escapees, dtype=np.int64)
-    c = np.asarray(clogged, dtype=bool)
-    if s.size == 0 or not c.any():
-        return []
-    fit = stats.fit_geometric(s, c)
-    mean = fit.mean
-    if not (math.isfinite(mean) and mean > 0):
-        return []
-    m = max(1, int(round(bin_fraction * mean)))
-    top = int(s[c].max()) + 1
-    if max_x is not None:
-        top = max(top, int(math.ceil(max_x * mean)))
-    nb = -(-top // m)
-    edges = np.arange(0, (nb + 1) * m, m)
-    counts, edges = stats.histogram(s, c, bins=edges)
-    n = int(c.sum())
-    width = m / mean
-    out = []
-    for j, cnt in enumerate(counts):
-        lo, hi = int(edges[j]), int(edges[j + 1])
-        out.append({"s_lo": lo, "s_hi": hi - 1, "x": 0.5 * (lo + hi - 1) / mean, "count": int(cnt),
-                    "pmf": cnt / (n * width),
-                    "stderr": math.sqrt(cnt * (1.0 - cnt / n)) / (n * width),
-                    "mean_s": mean, "bin_width_x": width, "n_clogged": n})
-    return out
-
-
 def pmf_lsq_rate(bins: list[dict]) -> float:
     """Slope ``k`` of ``ln(pmf) = a - k x`` over non-empty bins, weighted by count
     (``1`` for an exponential collapse); NaN with fewer than two non-empty bins."""
@@ -222,7 +186,7 @@ def point_stats(run: PointRun) -> dict:
     mean, (lo, hi) = stats.mean_escapees(s, c)
     method = stats.summarize(s, c)["mean_escapees_method"]
     never, (nlo, nhi) = stats.never_clogged_fraction(c)
-    bins = pmf_bins(s, c)
+    bins = stats.pmf_bins(s, c)
     d.update(n_clogged=fit.n_clogged, n_censored=fit.n_censored, mean_s=mean,
              mean_s_lo=lo, mean_s_hi=hi, mean_method=method,
              observed_mean_s=float(s.mean()),
@@ -421,7 +385,7 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
         pmf_rows = []
         for run in runs:
             s, c = run.samples()
-            bins = pmf_bins(s, c) if s.size else []
+            bins = stats.pmf_bins(s, c) if s.size else []
             pmfs.append(bins)
             for b in bins:
                 pmf_rows.append({"label": run.point.label, **run.point.values, **b})
