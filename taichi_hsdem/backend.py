@@ -19,6 +19,8 @@ import os
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from .limits import thread_share
+
 # stdout belongs to the user: no import banner; and skip Taichi's probes for
 # torch/paddle, which this package never hands arrays to.
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
@@ -71,8 +73,9 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
         # kernels compute exactly what their source says on every CPU. With Taichi's
         # default (fast_math=True) the fused and the per-step paths, or two CPUs with
         # and without AVX-512, round differently (seen: 1e-13 apart).
+        threads = {} if thread_share() is None else {"cpu_max_num_threads": thread_share()}
         ti.init(arch=target, default_fp=fp, default_ip=ti.i32, log_level=ti.ERROR,
-                offline_cache=True, fast_math=False)
+                offline_cache=True, fast_math=False, **threads)
     used = ti.lang.impl.current_cfg().arch.name
     if arch == "gpu" and used in ("x64", "arm64"):
         raise BackendError("arch=gpu was requested but Taichi found no usable GPU "

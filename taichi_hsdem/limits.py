@@ -33,6 +33,15 @@ HISTORY_SLOT_BYTES = 2 * (4 + 16)    # shear history: two buffers of (partner, 2
 MEMORY_FRACTION = 0.8
 #: More DEM steps than this can not finish (the paper's runs take 2e7).
 MAX_STEPS = 1.0e10
+#: A process's share of the cores, when something (a Dask worker) gave it one:
+#: Taichi's CPU threads and the pressure solver's processes stay within it.
+THREADS_ENV = "TAICHI_HSDEM_THREADS"
+
+
+def thread_share() -> int | None:
+    """The threads this process may use (``THREADS_ENV``), or None for all."""
+    value = os.environ.get(THREADS_ENV, "")
+    return int(value) if value.isdigit() and int(value) >= 1 else None
 
 
 @dataclass(frozen=True)

@@ -173,6 +173,17 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
     }
 
 
+def _allow_fast_math():
+    """Make backend.init's ti.init compile with fast_math on (benchmark only)."""
+    import taichi as ti
+    init = ti.init
+
+    def with_fast_math(*args, **kwargs):
+        kwargs["fast_math"] = True
+        return init(*args, **kwargs)
+    ti.init = with_fast_math
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--arch", default="cpu", choices=("cpu", "gpu"))
@@ -185,10 +196,15 @@ def main(argv=None):
                    help="also draw and encode this many video frames over the run "
                         "(realization 0; a scratch file), to time them and to see "
                         "whether memory grows per frame")
+    p.add_argument("--fast-math", action="store_true",
+                   help="compile the kernels with Taichi's fast_math (the package turns it "
+                        "off for bit-identical results): to time what that costs")
     p.add_argument("--one", help=argparse.SUPPRESS)   # internal: run one case here
     a = p.parse_args(argv)
     sim_time = a.sim_time or (0.02 if a.quick else 0.05)
     if a.one:
+        if a.fast_math:
+            _allow_fast_math()
         print(json.dumps(run_case(a.one, a.arch, a.precision, sim_time, a.video_frames)),
               flush=True)
         return 0
@@ -196,7 +212,8 @@ def main(argv=None):
     for case in chosen:
         proc = subprocess.run([sys.executable, __file__, "--one", case, "--arch", a.arch,
                                "--precision", a.precision, "--sim-time", str(sim_time),
-                               "--video-frames", str(a.video_frames)],
+                               "--video-frames", str(a.video_frames)]
+                              + (["--fast-math"] if a.fast_math else []),
                               capture_output=True, text=True)
         if proc.returncode != 0:
             print(json.dumps({"case": case, "error": proc.stderr.strip().splitlines()[-1:]}),

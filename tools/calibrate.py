@@ -64,6 +64,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a scalar of the scene (repeatable)")
     p.add_argument("--out", help="output folder (default runs/calibrate_<scene name>/)")
+    p.add_argument("--cluster", metavar="ADDRESS",
+                   help="run each round as a task on a Dask cluster: a scheduler address, or "
+                        "local[:N] (the cluster extra)")
     p.add_argument("--quick", action="store_true", help="smoke test: "
                    f"{QUICK_REALIZATIONS} realizations, {QUICK_ROUNDS} rounds, "
                    f"{QUICK_T_FRACTION:g} of run.t_end")
@@ -105,6 +108,7 @@ def main(argv=None) -> int:
     from taichi_hsdem.runner import RunFailed
     from taichi_hsdem.scene import SceneError, load_scene
     from taichi_hsdem.studies.calibrate import CalibrationError, calibrate, simulation_evaluator
+    from taichi_hsdem.studies.cluster import Cluster, ClusterError
 
     sets = list(args.set)
     realizations, rounds = args.realizations, args.rounds
@@ -115,10 +119,11 @@ def main(argv=None) -> int:
             realizations, rounds = min(realizations, QUICK_REALIZATIONS), QUICK_ROUNDS
         for value in (args.lo, args.hi):   # the parameter and both ends, checked now
             load_scene(args.scene, sets + [f"{args.param}={value!r}"])
+        pool = Cluster(args.cluster)
         evaluate = simulation_evaluator(args.scene, args.param, realizations, sets,
-                                        seed=args.seed)
-    except SceneError as exc:
-        for line in exc.problems:
+                                        seed=args.seed, pool=pool)
+    except (SceneError, ClusterError) as exc:
+        for line in getattr(exc, "problems", [str(exc)]):
             print(line, file=sys.stderr)
         return EXIT_INVALID
     out = pathlib.Path(args.out) if args.out else pathlib.Path("runs") / f"calibrate_{scene.name}"
@@ -153,8 +158,12 @@ def main(argv=None) -> int:
         f"<s> = {args.target:g}, {rounds} round(s) of {realizations} realization(s) "
         f"-> {out}")
     try:
-        cal = calibrate(evaluate_and_record, args.target, args.lo, args.hi, rounds=rounds,
-                        xtol=args.xtol, confidence=args.confidence, log=say)
+        with pool:
+            cal = calibrate(evaluate_and_record, args.target, args.lo, args.hi,
+                            rounds=rounds, xtol=args.xtol, confidence=args.confidence, log=say)
+    except ClusterError as exc:
+        print(exc, file=sys.stderr)
+        return EXIT_INVALID
     except CalibrationError as exc:
         print(f"calibration stopped: {exc}", file=sys.stderr)
         return EXIT_FAILED

@@ -48,6 +48,9 @@ def _parser() -> argparse.ArgumentParser:
                         "scene by the same package code (default: --resume)")
     p.add_argument("--quick", action="store_true",
                    help="smoke test: 1/10 of run.t_end, <= 2 realizations, into OUT/quick/")
+    p.add_argument("--cluster", metavar="ADDRESS",
+                   help="run the points on a Dask cluster: a scheduler address, or local[:N] "
+                        "for N worker processes here (the cluster extra)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     return p
 
@@ -57,6 +60,7 @@ def main(argv=None) -> int:
         args = _parser().parse_args(argv)
     except SystemExit as exc:          # --help (0) or a bad argument (2)
         return exc.code
+    from taichi_hsdem.studies.cluster import ClusterError
     from taichi_hsdem.studies.sweep import SweepError, load_sweep, run_sweep
     try:
         sweep = load_sweep(args.sweep)
@@ -74,8 +78,13 @@ def main(argv=None) -> int:
             print(message, file=sys.stderr, flush=True)
 
     say(f"{args.sweep}: {len(sweep.points)} point(s) of {sweep.scene} -> {out}")
-    rows = run_sweep(sweep.scene, list(sweep.points), out, resume=args.resume,
-                     progress=say, common=sweep.common, quick=args.quick)
+    try:
+        rows = run_sweep(sweep.scene, list(sweep.points), out, resume=args.resume,
+                         progress=say, common=sweep.common, quick=args.quick,
+                         cluster=args.cluster)
+    except ClusterError as exc:
+        print(exc, file=sys.stderr)
+        return EXIT_INVALID
     invalid = [r for r in rows if r["status"] == "invalid"]
     failed = [r for r in rows if r["status"] in ("failed", "unstable")]
     for r in invalid + failed:

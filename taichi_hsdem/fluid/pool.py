@@ -33,6 +33,8 @@ import traceback
 
 import numpy as np
 
+from ..limits import thread_share
+
 # Hierarchy options. Seven Ruge-Stuben levels down to a handful of unknowns cost
 # more in per-level overhead than they save on a grid of 1e4 unknowns; stopping at
 # 2000 unknowns with a sparse LU there took 30 ms per solve against 45 ms (vani
@@ -143,11 +145,13 @@ _PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspat
 
 
 def usable_cpus() -> int:
-    """CPUs this process may run on."""
+    """CPUs this process may run on (its affinity, within ``limits.thread_share``)."""
     try:
-        return len(os.sched_getaffinity(0))
+        cpus = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
-        return os.cpu_count() or 1
+        cpus = os.cpu_count() or 1
+    share = thread_share()
+    return min(cpus, share) if share else cpus
 
 
 class _Worker:

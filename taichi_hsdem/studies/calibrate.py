@@ -368,7 +368,7 @@ def calibrate(evaluate: Callable[[float], tuple], target: float, lo: float, hi: 
 
 def simulation_evaluator(scene_path: str | Path, param: str, realizations: int,
                          overrides: Iterable[str] = (), seed: int | None = None,
-                         progress: Callable[[str], None] | None = None):
+                         progress: Callable[[str], None] | None = None, pool=None):
     """An ``evaluate(value)`` for :func:`calibrate` that runs the scene.
 
     Each call sets ``param = value``, runs ``realizations`` realizations with
@@ -376,13 +376,12 @@ def simulation_evaluator(scene_path: str | Path, param: str, realizations: int,
     ``seed + i * realizations``; ``seed`` defaults to the scene's ``run.seed``),
     and returns the escapees and clog flags of the stable realizations, plus a
     dict with ``seed``, ``n_unstable`` and ``wall_time_s``; a run that cannot be
-    made or fails raises :class:`taichi_hsdem.runner.RunFailed`. The scene is checked
-    when the evaluator is made (``SceneError``); check ``param`` at the values
-    you will pass (``load_scene(scene_path, [f"{param}={value}"])``).
+    made or fails raises :class:`taichi_hsdem.runner.RunFailed`. With ``pool`` (an
+    open :class:`~taichi_hsdem.studies.cluster.Cluster`) each call runs as one task
+    on it. The scene is checked when the evaluator is made (``SceneError``); check
+    ``param`` at the values you will pass (``load_scene(scene_path,
+    [f"{param}={value}"])``).
     """
-    # the simulator loads Taichi (about a second): only once there is something to run
-    from ..runner import build, execute
-
     overrides = list(overrides)
     scene = load_scene(scene_path, overrides)
     first = scene.run.seed if seed is None else int(seed)
@@ -397,12 +396,22 @@ def simulation_evaluator(scene_path: str | Path, param: str, realizations: int,
                                                  f"run.seed={s0}"])
         say(f"{param} = {value:.6g}: {realizations} realization(s), seeds {s0}..."
             f"{s0 + realizations - 1}")
-        t0 = time.perf_counter()
-        result = execute(build(sc))
-        real = result.summary["realizations"]
+        if pool is None:
+            real, wall = run_realizations(sc)
+        else:
+            (real, wall), = pool.run(run_realizations, [(sc,)])
         ok = [r for r in real if r["status"] == "ok"]
         return ([r["escapees"] for r in ok], [bool(r["clogged"]) for r in ok],
-                {"seed": s0, "n_unstable": len(real) - len(ok),
-                 "wall_time_s": time.perf_counter() - t0})
+                {"seed": s0, "n_unstable": len(real) - len(ok), "wall_time_s": wall})
 
     return evaluate
+
+
+def run_realizations(scene) -> tuple[list[dict], float]:
+    """The realizations of ``scene`` run to the end (here or on a cluster worker),
+    and the wall time."""
+    # the simulator loads Taichi (about a second): only once there is something to run
+    from ..runner import build, execute
+    t0 = time.perf_counter()
+    result = execute(build(scene))
+    return result.summary["realizations"], time.perf_counter() - t0

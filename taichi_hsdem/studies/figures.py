@@ -105,6 +105,7 @@ from ..digest import code_digest
 from .points import (DEFAULT_POINTS, DEFAULT_REALIZATIONS, FIGURES, PAPER_REALIZATIONS,
                      QUICK_POINTS, SPEC, FigureError, PointRun, base_scene, build_points,
                      load_point, point_file, point_key, run_point, save_point, series_by_seed)
+from .cluster import Cluster, ClusterError
 from .plots import pyplot, render
 from ..scene import SceneError
 
@@ -296,12 +297,15 @@ def _opts_from_args(command, args) -> dict:
 
 def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(),
                scene=None, seed=None, batch=None, opts=None, log=None, argv=None,
-               resume=True) -> dict:
+               resume=True, cluster=None) -> dict:
     """Run one figure; returns ``{"out", "files", "points", "runs"}``.
 
     Every finished point is kept in ``<out>/points/``; with ``resume`` a point kept
     there from the same scene, realization count and code is read back instead of
     run again, so an interrupted figure restarts where it stopped.
+
+    With ``cluster`` (a Dask scheduler address or ``"local[:N]"``) the points run
+    one task each on the cluster (:mod:`.cluster`).
 
     Raises :class:`FigureError` for invalid scenes or arguments before anything runs.
     """
@@ -348,22 +352,33 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
     say(f"{command}: {len(points)} point(s) x {realizations} realization(s), t_end = "
         f"{base.run.t_end:g} s{' (quick)' if quick else ''} -> {out}")
     t0 = time.perf_counter()
-    runs, rows = [], []
+    runs = [None] * len(points)
+    keys = [point_key(p, realizations) for p in points]
+    todo = []
     for k, (p, path) in enumerate(zip(points, kept_files)):
-        key = point_key(p, realizations)
-        kept = load_point(path, key, p) if resume else None
+        kept = load_point(path, keys[k], p) if resume else None
         if kept is not None:
             say(f"[{k + 1}/{len(points)}] {p.label}: finished earlier, read from {path}")
-            run = kept
+            runs[k] = kept
         else:
-            say(f"[{k + 1}/{len(points)}] {p.label} ...")
-            run = run_point(p, int(realizations), batch, log=say)
-            if not run.error:
-                save_point(path, key, run)
-        row = _point_row(command, run)
-        runs.append(run)
-        rows.append(row)
-        print(summary_line(command, run, row), flush=True)
+            todo.append(k)
+
+    def finished(i, run):
+        k = todo[i]
+        if not run.error:
+            save_point(kept_files[k], keys[k], run)
+        runs[k] = run
+        print(summary_line(command, run, _point_row(command, run)), flush=True)
+
+    if todo:
+        say(f"running {len(todo)} point(s)" + (f" on the cluster {cluster}" if cluster else ""))
+    with Cluster(cluster) as pool:
+        pool.run(run_point, [(points[k], int(realizations), batch, say if not cluster else None)
+                             for k in todo], finished)
+    for k, run in enumerate(runs):
+        if k not in todo:
+            print(summary_line(command, run, _point_row(command, run)), flush=True)
+    rows = [_point_row(command, run) for run in runs]
     wall = time.perf_counter() - t0
 
     files = []
@@ -436,6 +451,9 @@ def _parser() -> argparse.ArgumentParser:
     common.add_argument("--batch", type=int, metavar="B",
                         help="realizations run together per simulation (default: all)")
     common.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    common.add_argument("--cluster", metavar="ADDRESS",
+                        help="run the points on a Dask cluster: a scheduler address, or "
+                             "local[:N] for N worker processes here (the cluster extra)")
     common.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
                         help="read back points finished earlier in --out/points/ (same "
                              "scene, realizations and code) instead of running them again "
@@ -479,9 +497,9 @@ def main(argv=None) -> int:
         res = run_figure(args.figure, quick=args.quick, realizations=args.realizations,
                          out=args.out, sets=args.set, scene=args.scene, seed=args.seed,
                          batch=args.batch, opts=_opts_from_args(args.figure, args), log=log,
-                         argv=argv, resume=args.resume)
-    except FigureError as exc:
-        for line in exc.problems:
+                         argv=argv, resume=args.resume, cluster=args.cluster)
+    except (FigureError, ClusterError) as exc:
+        for line in getattr(exc, "problems", [str(exc)]):
             print(line, file=sys.stderr)
         return 2
     return 1 if any(r.error for r in res["runs"]) else 0

@@ -55,6 +55,7 @@ from ..scene import Scene, SceneError, load_scene, read_toml, scene_to_toml
 from ..scene.toml import toml_value
 from . import fmt
 from ..digest import code_digest
+from .cluster import Cluster
 
 __all__ = [
     "SweepError", "Sweep", "load_sweep", "expand_grid", "point_folder", "run_sweep",
@@ -376,7 +377,8 @@ def _write_index(out: Path, base: Path, common: Mapping, entries: dict[str, dict
 def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
               out_dir: str | Path, resume: bool = True,
               progress: Callable[[str], None] | None = None,
-              common: Mapping[str, Any] | None = None, quick: bool = False) -> list[dict]:
+              common: Mapping[str, Any] | None = None, quick: bool = False,
+              cluster: str | None = None) -> list[dict]:
     """Run ``base_scene_path`` at every point; write one folder per point.
 
     Parameters
@@ -400,6 +402,9 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
         Smoke test: each point run with :func:`quick_overrides` (a tenth of its
         ``run.t_end``, at most two realizations); folder names do not change, so
         give a separate ``out_dir``.
+    cluster : str, optional
+        Run the points on a Dask cluster (:mod:`.cluster`): a scheduler address or
+        ``"local[:N]"``; the folders must be on a file system the workers share.
 
     Returns
     -------
@@ -417,10 +422,6 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
     SweepError
         A point is not a valid scene (every problem listed; nothing is run).
     """
-    # the simulator loads Taichi (about a second): only once there is something to run
-    from ..output import write_resolved_scene, write_series, write_summary
-    from ..runner import RunFailed, build, execute, unstable_message
-
     base = Path(base_scene_path)
     common = dict(common or {})
     points = [dict(p) for p in points]
@@ -433,53 +434,70 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
     out.mkdir(parents=True, exist_ok=True)
     code_digest()                  # this process's code, before any point runs
     say = progress or (lambda message: None)
-    rows = []
     total = len(points)
+    rows: list = [None] * total
+    tasks, where_of = [], []
     for k, (point, scene) in enumerate(zip(points, scenes)):
         folder = point_folder(point)
-        where = out / folder
         key = _scene_key(scene)
-        head = f"[{k + 1}/{total}] {folder}"
-        done = _finished_summary(where, key) if resume else None
+        done = _finished_summary(out / folder, key) if resume else None
         if done is not None:
-            say(f"{head}: skipped (finished)")
-            rows.append(_row(folder, point, "skipped", done))
+            say(f"[{k + 1}/{total}] {folder}: skipped (finished)")
+            rows[k] = _row(folder, point, "skipped", done)
             continue
-        where.mkdir(parents=True, exist_ok=True)
-        # A result of other overrides left here must not pass for this point's.
-        (where / SUMMARY).unlink(missing_ok=True)
-        try:
-            sim = build(scene)
-        except RunFailed as error:
-            message = "; ".join(error.lines)
-            say(f"{head}: refused: {message}")
-            rows.append(_row(folder, point, "invalid", None, message))
-            continue
-        say(f"{head}: running {sim.R} realization(s) to t = {scene.run.t_end:g}")
-        write_resolved_scene(sim.scene, where, sim.model.notes)
-        try:
-            result = execute(sim)
-        except RunFailed as error:
-            message = "; ".join(error.lines)
-            say(f"{head}: failed: {message}")
-            rows.append(_row(folder, point, "failed", None, message))
-            continue
-        summary = result.summary
-        summary["sweep"] = {"overrides": point, "common": common,
-                            "base_scene": str(base), "scene_sha256": key}
-        statuses = [r["status"] for r in summary["realizations"]]
-        write_series(result.series, statuses, where)
-        write_summary(summary, where)  # last: its presence marks the point finished
-        summary = json.loads((where / SUMMARY).read_text())  # as later sweeps read it
-        message = unstable_message(result)
-        status = "unstable" if message else "ran"
-        row = _row(folder, point, status, summary, message)
-        rows.append(row)
-        mean, (lo, hi) = row["mean_escapees"], row["mean_escapees_ci"]
+        tasks.append((scene, point, common, str(base), str(out / folder), key))
+        where_of.append(k)
+    if tasks:
+        say(f"running {len(tasks)} point(s)" + ("" if cluster is None else
+                                                f" on the cluster {cluster}"))
+
+    def finished(i, answer):
+        k = where_of[i]
+        status, summary, message = answer
+        folder = point_folder(points[k])
+        head = f"[{k + 1}/{total}] {folder}"
+        rows[k] = _row(folder, points[k], status, summary, message)
+        if summary is None:
+            say(f"{head}: {'refused' if status == 'invalid' else 'failed'}: {message}")
+            return
+        mean, (lo, hi) = rows[k]["mean_escapees"], rows[k]["mean_escapees_ci"]
         say(f"{head}: done in {summary['wall_time_s']:.1f} s, mean escapees "
-            f"{fmt(mean)} [{fmt(lo)}, {fmt(hi)}], {row['n_clogged']}/{row['n_ok']} "
+            f"{fmt(mean)} [{fmt(lo)}, {fmt(hi)}], {rows[k]['n_clogged']}/{rows[k]['n_ok']} "
             f"clogged" + (f"; {message}" if message else ""))
-        del sim, result
+
+    with Cluster(cluster) as pool:
+        pool.run(run_point, tasks, finished)
     _write_index(out, base, common, {row["folder"]: row["overrides"] for row in rows})
     _write_table(rows, out)
     return rows
+
+
+def run_point(scene: Scene, point: Mapping, common: Mapping, base: str, where: str,
+              key: str) -> tuple[str, dict | None, str | None]:
+    """Run one point of a sweep into folder ``where`` (here or on a cluster worker):
+    ``(status, summary as written or None, message)``."""
+    # the simulator loads Taichi (about a second): only once there is something to run
+    from ..output import write_resolved_scene, write_series, write_summary
+    from ..runner import RunFailed, build, execute, unstable_message
+    where = Path(where)
+    where.mkdir(parents=True, exist_ok=True)
+    # A result of other overrides left here must not pass for this point's.
+    (where / SUMMARY).unlink(missing_ok=True)
+    try:
+        sim = build(scene)
+    except RunFailed as error:
+        return "invalid", None, "; ".join(error.lines)
+    write_resolved_scene(sim.scene, where, sim.model.notes)
+    try:
+        result = execute(sim)
+    except RunFailed as error:
+        return "failed", None, "; ".join(error.lines)
+    summary = result.summary
+    summary["sweep"] = {"overrides": dict(point), "common": dict(common), "base_scene": base,
+                        "scene_sha256": key}
+    statuses = [r["status"] for r in summary["realizations"]]
+    write_series(result.series, statuses, where)
+    write_summary(summary, where)  # last: its presence marks the point finished
+    summary = json.loads((where / SUMMARY).read_text())  # as later sweeps read it
+    message = unstable_message(result)
+    return ("unstable" if message else "ran"), summary, message
