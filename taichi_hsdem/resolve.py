@@ -49,6 +49,8 @@ MAX_TRAVEL_BETWEEN_SOLVES = 0.5  # diameters a particle may move between solves,
 # Taichi backends on which "auto" stepping stays per-step (one realization per thread
 # would leave a GPU idle).
 GPU_ARCHS = ("cuda", "vulkan", "metal", "opengl", "dx11", "dx12", "amdgpu", "gles")
+# Taichi backends without float64 kernels (the multigrid solve needs them).
+F32_ONLY_ARCHS = ("vulkan", "metal", "opengl", "dx11", "dx12", "gles")
 
 
 @dataclass
@@ -93,6 +95,7 @@ class Model:
     initial_poses: np.ndarray | None = None
     kappa_free: float = 0.0
     stepping: str = "per_step"    # "fused" or "per_step" (run.stepping resolved)
+    fluid_solver: str = "amg"     # "gmg" or "amg" (fluid.solver resolved)
     check_every: int = CHECK_INTERVAL  # steps between host-side checks
     skin: float = 0.0             # Verlet skin
     # mean fluid speed through the constriction of the open channel (no particles)
@@ -551,6 +554,7 @@ def _resolve(scene: Scene, arch: str) -> Model:
     model.skin = SKIN_FRACTION * d_min
     _resolve_stepping(model, arch, res.values, res.notes)
     if f.enabled:
+        _resolve_solver(model, arch, res)
         _resolve_intervals(model, res.values, res.notes)
     model.scene = scene.with_values(res.values)
     return model
@@ -725,6 +729,24 @@ def _resolve_stepping(model: Model, arch: str, values: dict, notes: dict) -> Non
     model.stepping = "fused" if fused else "per_step"
     values["run.stepping"] = model.stepping
     notes["run.stepping"] = why
+
+
+def _resolve_solver(model: Model, arch: str, res: _Resolution) -> None:
+    """``fluid.solver``: the Taichi multigrid where the backend has float64 kernels
+    (README, Speed: 2.8 times pyamg on the vani grid, 19 times at 1.1M cells)."""
+    given = model.scene.fluid.solver
+    f64 = arch not in F32_ONLY_ARCHS
+    if given == "gmg" and not f64:
+        res.bad("fluid.solver", f'"gmg" solves in float64, which Taichi\'s {arch} backend '
+                'lacks; use "amg" (or "auto")')
+        res.stop_if_bad()
+    if given != "auto":
+        model.fluid_solver = given
+        return
+    model.fluid_solver = "gmg" if f64 else "amg"
+    res.note("fluid.solver", model.fluid_solver,
+             "Taichi multigrid CG: every realization at once, on the device" if f64 else
+             f"pyamg on the host: Taichi's {arch} backend has no float64 kernels")
 
 
 def open_channel_speed(model: Model) -> float:

@@ -82,7 +82,7 @@ def test_bad_scene_exit_2_one_line_per_problem(tmp_path, capsys, text, expected)
 
 
 def test_several_problems_reported_together(tmp_path, capsys):
-    text = BASE.replace("t_end = 60.0", "t_end = -1.0").replace("gap = 1.6", "gap = -1.0")
+    text = BASE.replace("t_end = 60.0", "t_end = -1.0").replace("gap = 1.7", "gap = -1.0")
     code, _, stderr = run_cli([bad_scene(tmp_path, text)], capsys)
     assert code == 2
     lines = [l for l in stderr.splitlines() if l.strip()]

@@ -8,6 +8,7 @@ fuzzing run: ``HYPOTHESIS_PROFILE=fuzz python -m pytest tests/test_fuzz.py``.
 """
 import math
 import os
+import signal
 import time
 from pathlib import Path
 
@@ -59,8 +60,15 @@ def _numbers(spec, key):
     return values
 
 
+# A valid tiny run.dt is a long run, not a wrong one: only values that must be
+# refused (above the critical step, or too many steps) or are not numbers.
+DT_VALUES = ["0", "-1.0", "1e300", "1e-300", "1e-200", '"auto"', '"fast"', "nan"]
+
+
 def _value(key, spec):
     """A --set value (TOML text) for ``key``."""
+    if key == "run.dt":
+        return st.sampled_from(DT_VALUES)
     wrong = st.sampled_from(['"auto"', '"text"', "true", "[1.0, 2.0]", "[[0.0, 0.0]]",
                              '"nan"', "{a = 1}", "-0.0"])
     if spec.kind in ("float", "int"):
@@ -106,7 +114,17 @@ def test_any_override_gives_an_answer_not_a_traceback(base, sets, bad_end, tmp_p
     for text in sets + ["run.t_end=0.004"] + ([bad_end] if bad_end else []):
         args += ["--set", text]
     t0 = time.perf_counter()
-    code = main(args)                        # an exception here is the failure
+
+    def too_long(signum, frame):
+        raise TimeoutError(f"no answer within {MAX_SECONDS} s: {args}")
+
+    previous = signal.signal(signal.SIGALRM, too_long)
+    signal.alarm(MAX_SECONDS)
+    try:
+        code = main(args)                    # an exception here is the failure
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
     seconds = time.perf_counter() - t0
     err = capsys.readouterr().err
     assert code in (0, 1, 2), (code, err)

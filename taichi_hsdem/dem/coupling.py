@@ -12,8 +12,10 @@
   polygon's area (divergence theorem) — the property a test checks.
 
 :class:`FluidCoupling` owns the fluid arrays of a batch (permeability, carried
-flux, pressure) and the :class:`~taichi_hsdem.fluid.PressureSolver`; the host
-calls :meth:`FluidCoupling.update` every ``fluid.update_interval`` steps.
+flux, pressure) and the pressure solver (``fluid.solver``: the Taichi multigrid,
+which reads the permeability where the kernels wrote it and leaves the pressure
+there, or pyamg on the host); the host calls :meth:`FluidCoupling.update` every
+``fluid.update_interval`` steps.
 """
 
 import time
@@ -23,6 +25,7 @@ import numpy as np
 from .. import backend
 from ..backend import ti  # sets the environment before Taichi loads
 from ..fluid import PressureSolver
+from ..fluid.gmg import TaichiPressureSolver
 from . import state
 from .kmath import cross, node_world, rot, rot_t, spin, template_sample
 from .layout import SAMPLING
@@ -145,6 +148,15 @@ def pressure_forces(x: ti.types.ndarray(), th: ti.types.ndarray(),
 
 
 @ti.kernel
+def finite_or_zero(src: ti.types.ndarray(), dst: ti.types.ndarray()):
+    """``dst = src`` in the kernels' precision, 0 where ``src`` is not finite (the
+    walls and cut-off cells, which hold NaN)."""
+    for I in ti.grouped(src):
+        value = src[I]
+        dst[I] = 0.0 if ti.math.isnan(value) or ti.math.isinf(value) else value
+
+
+@ti.kernel
 def load_forces(f: ti.types.ndarray(), tau: ti.types.ndarray(), f0: ti.types.ndarray(),
                 tau0: ti.types.ndarray()):
     """Start a step's force sums from the held fluid forces ``f0``, ``tau0``."""
@@ -171,10 +183,11 @@ class FluidCoupling:
         nx, ny = model.fluid_shape
         shape = (n_real, nx, ny)
         self.model = model
-        self.solver = PressureSolver(model.fluid_active, model.fluid_dx, model.fluid_dx,
-                                     fl.viscosity, model.bc(), n_batch=n_real,
-                                     tol=fl.solver_tol, gap=fl.gap,
-                                     workers=model.fluid_workers)
+        solver = TaichiPressureSolver if model.fluid_solver == "gmg" else PressureSolver
+        self.solver = solver(model.fluid_active, model.fluid_dx, model.fluid_dx, fl.viscosity,
+                             model.bc(), n_batch=n_real, tol=fl.solver_tol, gap=fl.gap,
+                             workers=model.fluid_workers)
+        self.on_device = model.fluid_solver == "gmg"
         self.active = state.array(model.fluid_active.astype(np.int32), ti.i32)
         self.base = state.array(np.where(model.fluid_active, model.kappa_free, 0.0))
         self.kappa = state._zeros(shape)
@@ -188,7 +201,8 @@ class FluidCoupling:
         self.grid = (float(g.x_min), float(g.y_min), float(model.fluid_dx))
         self.gap = float(fl.gap)
         self.sampling = SAMPLING[fl.pressure_sampling]
-        self.pressure = np.full(shape, np.nan)     # the last solve's, Pa (NaN: walls)
+        self._pressure = np.full(shape, np.nan)    # the last solve's, Pa (NaN: walls)
+        self._pressure_device = None               # the same, on the device (gmg)
         self.last_info = None                      # its SolveInfo
         self._kappa_solved = None
         self.updates = 0
@@ -237,30 +251,50 @@ class FluidCoupling:
                                particles.bounding_radius, materials.kappa, t.is_circle,
                                t.radius, t.ls_phi, t.ls_grad, t.ls_meta, t.ls_geo, self.base,
                                self.kappa, self.vs, self.ws, self.carried, *self.grid)
-        kappa = self.kappa.to_numpy().astype(float)
         self.updates += 1
-        if not force and self._kappa_solved is not None:
-            frac = m.scene.fluid.resolve_fraction
-            if frac > 0 and not flux:
-                changed = (kappa != self._kappa_solved).sum(axis=(1, 2)) / m.fluid_active.sum()
-                if changed.max() <= frac:
-                    self.apply_forces(bodies, batch, particles, templates)  # same pressure,
-                    return None                                            # moved bodies
+        frac = m.scene.fluid.resolve_fraction
+        kappa = None
+        if flux or not self.on_device or frac > 0:
+            kappa = self.kappa.to_numpy().astype(float)
+        if not force and self._kappa_solved is not None and frac > 0 and not flux:
+            changed = (kappa != self._kappa_solved).sum(axis=(1, 2)) / m.fluid_active.sum()
+            if changed.max() <= frac:
+                self.apply_forces(bodies, batch, particles, templates)  # same pressure,
+                return None                                            # moved bodies
         t0 = time.perf_counter()
-        pres, info = self.solver.solve(
-            kappa, carried=self.carried.to_numpy().astype(float) if flux else None,
+        carried = occupied = None
+        if flux:
+            carried = self.carried.to_numpy().astype(float)
             # a free cell holds kappa_free in the kernels' precision (f32 rounds 0.12
             # down to 0.1199999973, below the float64 value: compare like with like)
-            occupied=(kappa < float(backend.numpy_real()(m.kappa_free))) & m.fluid_active
-            if flux else None)
+            occupied = (kappa < float(backend.numpy_real()(m.kappa_free))) & m.fluid_active
+        if self.on_device:
+            pres, info = self.solver.solve(self.kappa if kappa is None else kappa,
+                                           carried=carried, occupied=occupied, host=False)
+            self._pressure_device, self._pressure = pres, None
+            finite_or_zero(pres, self.pres)
+        else:
+            pres, info = self.solver.solve(kappa, carried=carried, occupied=occupied)
+            self._pressure = pres
+            self.pres.from_numpy(np.nan_to_num(pres, nan=0.0).astype(backend.numpy_real()))
         self.seconds += time.perf_counter() - t0
         self.solves += 1
         self._kappa_solved = kappa
-        self.pressure = pres
         self.last_info = info
-        self.pres.from_numpy(np.nan_to_num(pres, nan=0.0).astype(backend.numpy_real()))
         self.apply_forces(bodies, batch, particles, templates)
         return info
+
+    @property
+    def pressure(self) -> np.ndarray:
+        """The last solve's pressure, (R, nx, ny), Pa, NaN in walls (a host copy)."""
+        if self._pressure is None:
+            self._pressure = self._pressure_device.to_numpy()
+        return self._pressure
+
+    @pressure.setter
+    def pressure(self, value):
+        self._pressure = np.asarray(value, dtype=float)
+        self._pressure_device = None
 
     def summary(self) -> dict:
         """``summary.json``'s ``"fluid"`` entry."""

@@ -146,6 +146,11 @@ class FluidConfig(Config):
     resolve_fraction: float = keyfield("float", "re-solve only if more than this fraction "
                                       "of cells changed permeability (0: always), "
                                       "dimensionless", 0.0, ge=0, lt=1)
+    solver: str = keyfield("choice", '"gmg": geometric-multigrid CG in Taichi (matrix-free, '
+                           "every realization at once, on the device); \"amg\": pyamg's "
+                           "Ruge-Stuben CG on the host (the reference); \"auto\": gmg where "
+                           "the backend has float64 kernels (CPU, CUDA), else amg", AUTO,
+                           choices=("auto", "gmg", "amg"))
     solver_tol: float = keyfield("float", "relative residual of the multigrid solve, "
                                 "dimensionless", 1e-8, gt=0, le=1e-2)
     workers: int | str = keyfield("int", "processes that share the realizations' pressure "

@@ -1,0 +1,593 @@
+"""Multigrid pieces of the Taichi pressure solver (:mod:`.gmg`): its constants and
+array layout, the matrix-free five-point operator, the 2 x 2 aggregation levels
+with their Galerkin operators, red-black Gauss-Seidel smoothing, the coarsest
+level's Cholesky solve and the V-cycle. Package-internal: :mod:`.gmg` is the API."""
+# No "from __future__ import annotations": Taichi reads kernel annotations as objects.
+
+from ..backend import ti
+
+# Most CG iterations one realization may take in one solve. From zero to 1e-8
+# (tools/bench_solvers.py --study contrast, 175 x 61 to 1400 x 488 cells): 12-15
+# at the Kozeny-Carman contrast (1/60), up to 39 at 1e-3 and 87 at 1e-6 with half
+# the area in overlapping disks that enclose fluid; reaching this means the solve
+# failed, and the flux check reports it.
+MAXITER = 500
+
+# Red-black Gauss-Seidel sweeps before and after each coarse correction. Two
+# sweeps took 13-17 iterations against 19-22 for one at contrast 60 (175 x 61 to
+# 1400 x 488 cells): more work per iteration, less per solve.
+SWEEPS = 2
+
+# Scaling of the coarse correction. At contrast 60-1e3 and two sweeps, 1.0 took
+# 35-72 iterations, 1.5 took 19-35, 1.8 took 14-27, 2.0 took 13-25, 2.3 took 13-31.
+OVERCORRECTION = 2.0
+
+# Cells per realization at or below which a level is not coarsened further but
+# factored (dense Cholesky: COARSEST_CELLS^3 / 3 flops per realization per set-up).
+COARSEST_CELLS = 64
+
+# On the CPU, levels with at most this many cells per realization are cycled by
+# one thread per realization in a single kernel launch: on a 10^3-10^4-cell level
+# the cost of launching a parallel loop (tens of microseconds on 2 cores) exceeds
+# the work in it.
+SERIAL_CELLS = 4096
+
+# On the CPU, grids of at most this many cells are solved one realization per
+# thread in a single kernel launch (parallel="realizations"); larger ones with
+# every thread on each grid-sized loop (parallel="rows"), which a single large
+# realization needs. The vani grid (10^4 cells), R = 1: 8 ms per cold solve one
+# way against 21 ms the other (preliminary, a loaded 2-core machine).
+REALIZATION_CELLS = 2**16
+
+# Components of an entry of the operator: the transmissibility of the east and of
+# the north face of the cell (of a ghost: of its one Dirichlet face, see Layout).
+_TX, _TY = 0, 1
+# Rows of the multigrid work array: the correction and its right-hand side (on
+# the finest level, the preconditioned residual z and the CG residual r).
+_X, _B = 0, 1
+# Rows of the fine-level CG array: solution (p - p_ref), search direction,
+# A times it, right-hand side, and the part of it that depends on kappa only.
+_SOL, _DIR, _ADIR, _RHS, _BASE = range(5)
+# Columns of the level table.
+_OFF, _NX, _NY = 0, 1, 2
+# Per-realization integers: still iterating, iterations done, no driving at all
+# (b = 0), and the permeability scan's counts of changed, zero and invalid cells.
+_RUNNING, _ITERS, _UNDRIVEN, _CHANGED, _ZEROS, _BAD = range(6)
+# Per-realization floats: r.z, |b|^2, |r|^2, CG step and direction coefficients,
+# the inlet's total permeability (flow_rate), the final relative residual.
+_RZ, _BB, _RR, _ALPHA, _BETA, _INLET, _RES = range(7)
+# How a Gauss-Seidel half-sweep reads its neighbours: as stored; as zero (the
+# first half-sweep of a cycle, which starts from x = 0); or with the coarse
+# correction added (the first half-sweep after it, see _relax).
+_STORED, _ZERO, _CORRECTED = range(3)
+# Ways to share the work among threads (TaichiPressureSolver, parameter parallel).
+_PARALLEL = ("realizations", "rows", "cells")
+# With parallel="cells" each realization gets a multiple of this many iterations
+# of a parallel loop, so that its cells fall at the same places in the blocks
+# Taichi cuts the loop into (32 iterations on the CPU) and in a CPU's vector
+# lanes: otherwise a vectorized block and its scalar remainder round differently
+# and a realization's result would depend on its place in the batch.
+_LANES = 64
+# Taichi's CPU backend hands a parallel loop to its threads in blocks of up to 512
+# iterations (measured with ti.global_thread_idx: a loop of 100 or 512 runs on one
+# thread, ti.loop_config(block_dim=1) or not). So a loop over realizations runs
+# _TASK iterations per realization, one of them working; and in the ``rows`` way
+# a thread takes a segment of a grid column, _SEGMENT cells, not the whole column
+# (a grid of 1590 columns would give 2 threads 1024 and 566 of them).
+_TASK = 512
+_SEGMENT = 64
+# Left, right, bottom, top: the box sides in the order of fluid._SIDES.
+_SIDE_NAMES = ("left", "right", "bottom", "top")
+
+_vec2 = ti.types.vector(2, ti.f64)
+_Ops = ti.types.ndarray(dtype=_vec2, ndim=1)
+_Sides = ti.types.ndarray(dtype=_vec2, ndim=2)
+_Rows = ti.types.ndarray(dtype=ti.f64, ndim=2)
+_Ints = ti.types.ndarray(dtype=ti.i32, ndim=2)
+_Cells = ti.types.ndarray(dtype=ti.i8, ndim=3)
+_Mask = ti.types.ndarray(dtype=ti.i8, ndim=2)
+_Chol = ti.types.ndarray(dtype=ti.f64, ndim=3)
+_Field = ti.types.ndarray(dtype=ti.f64, ndim=3)
+_Grid = ti.types.ndarray(ndim=3)     # any float type: the simulation's kappa
+_Vectors = ti.types.ndarray(ndim=4)  # (R, nx, ny, 2), any float type
+
+
+# ---------------------------------------------------------------- cell helpers
+# ``k`` is a flat index and ``s = ny + 1`` the column stride of its level.
+@ti.func
+def _index(geo: ti.template(), l, r, i, j):
+    """Flat index of (i, j) of realization r on level l; see Layout for the ghosts
+    (i = -1, i = nx, j = ny)."""
+    return geo[l, _OFF] + (r * (geo[l, _NX] + 2) + i + 1) * (geo[l, _NY] + 1) + j
+
+
+@ti.func
+def _diagonal(op: ti.template(), k, s):
+    return op[k][_TX] + op[k][_TY] + op[k - s][_TX] + op[k - 1][_TY]
+
+
+@ti.func
+def _neighbours(op: ti.template(), a: ti.template(), row, k, s):
+    """``sum_f T_f a_f`` over the four faces of cell k (a ghost's a is 0)."""
+    return (op[k - s][_TX] * a[row, k - s] + op[k][_TX] * a[row, k + s]
+            + op[k - 1][_TY] * a[row, k - 1] + op[k][_TY] * a[row, k + 1])
+
+
+@ti.func
+def _apply(op: ti.template(), a: ti.template(), row, k, s):
+    """``(A a)_k``."""
+    return _diagonal(op, k, s) * a[row, k] - _neighbours(op, a, row, k, s)
+
+
+@ti.func
+def _relax(op: ti.template(), mg: ti.template(), k, s, reads, alpha, parents):
+    """Gauss-Seidel update of one cell: ``x = (b + sum_f T_f x_f) / diag``.
+
+    A cell that is no unknown gets 0. With ``reads == _CORRECTED`` each neighbour
+    is read with the coarse correction added, ``x_f + alpha x_c[parent]``
+    (``parents``: the coarse indices of the west, east, south and north
+    neighbours' parents): in the black half-sweep that follows the correction
+    only the red neighbours' corrected values are needed (an update overwrites
+    the cell's own value, and the red sweep after it reads only black cells), so
+    the corrected field is never stored.
+    """
+    d = _diagonal(op, k, s)
+    x = ti.f64(0.0)
+    if d > 0:
+        v = mg[_B, k]
+        if reads == _STORED:
+            v += _neighbours(op, mg, _X, k, s)
+        elif reads == _CORRECTED:
+            v += (op[k - s][_TX] * (mg[_X, k - s] + alpha * mg[_X, parents[0]])
+                  + op[k][_TX] * (mg[_X, k + s] + alpha * mg[_X, parents[1]])
+                  + op[k - 1][_TY] * (mg[_X, k - 1] + alpha * mg[_X, parents[2]])
+                  + op[k][_TY] * (mg[_X, k + 1] + alpha * mg[_X, parents[3]]))
+        x = v / d
+    mg[_X, k] = x
+
+
+@ti.func
+def _parent_columns(geo: ti.template(), l, r, i):
+    """Coarse indices of (I, 0) for the parents of the west, own and east
+    neighbours of column i, and the coarse ny; a ghost's parent is a coarse
+    ghost, so that it gets no correction."""
+    nx, mx = geo[l, _NX], geo[l + 1, _NX]
+    east = (i + 1) // 2 if i + 1 < nx else mx
+    return ti.Vector([_index(geo, l + 1, r, (i + 1) // 2 - 1, 0),
+                      _index(geo, l + 1, r, i // 2, 0),
+                      _index(geo, l + 1, r, east, 0), geo[l + 1, _NY]])
+
+
+@ti.func
+def _parents(columns, j, ny):
+    """Coarse indices of the parents of the west, east, south and north
+    neighbours of cell (i, j), from _parent_columns of column i."""
+    north = (j + 1) // 2 if j + 1 < ny else columns[3]
+    return ti.Vector([columns[0] + j // 2, columns[2] + j // 2,
+                      columns[1] + (j + 1) // 2 - 1, columns[1] + north])
+
+
+@ti.func
+def _relax_cell(op: ti.template(), mg: ti.template(), geo: ti.template(), l, r, i, j,
+                reads, alpha):
+    ny = geo[l, _NY]
+    parents = ti.Vector([0, 0, 0, 0])
+    if reads == _CORRECTED:
+        parents = _parents(_parent_columns(geo, l, r, i), j, ny)
+    _relax(op, mg, _index(geo, l, r, i, j), ny + 1, reads, alpha, parents)
+
+
+@ti.func
+def _relax_row(op: ti.template(), mg: ti.template(), geo: ti.template(), l, r, i, j0, j1,
+               colour, reads, alpha):
+    """One colour of cells j0..j1-1 of grid column i, with the column's indices
+    computed once."""
+    ny = geo[l, _NY]
+    k0 = _index(geo, l, r, i, 0)
+    columns = ti.Vector([0, 0, 0, 0])
+    if reads == _CORRECTED:
+        columns = _parent_columns(geo, l, r, i)
+    first = j0 + (i + colour + j0) % 2
+    for h in range((j1 - first + 1) // 2):
+        j = first + 2 * h
+        parents = ti.Vector([0, 0, 0, 0])
+        if reads == _CORRECTED:
+            parents = _parents(columns, j, ny)
+        _relax(op, mg, k0 + j, ny + 1, reads, alpha, parents)
+
+
+@ti.func
+def _segments(n):
+    """How many segments of _SEGMENT cells a column of n cells has."""
+    return (n + _SEGMENT - 1) // _SEGMENT
+
+
+@ti.func
+def _segment(t, nx, ny, segments):
+    """(r, i, j0, j1) of work item t of a loop over the segments of every column:
+    realization r, column i, cells j0..j1-1."""
+    per_r = nx * segments
+    r, rest = t // per_r, t % per_r
+    seg = rest % segments
+    return r, rest // segments, seg * _SEGMENT, ti.min((seg + 1) * _SEGMENT, ny)
+
+
+@ti.func
+def _restrict_row(op: ti.template(), mg: ti.template(), geo: ti.template(), l, r, I,
+                  J0, J1):
+    """Right-hand sides of coarse cells (I, J0..J1-1): the sums of their
+    children's residuals."""
+    nx, ny = geo[l, _NX], geo[l, _NY]
+    s = ny + 1
+    west = _index(geo, l, r, 2 * I, 0)
+    coarse = _index(geo, l + 1, r, I, 0)
+    for J in range(J0, J1):
+        v = ti.f64(0.0)
+        for child in range(4):
+            a, b = child % 2, child // 2
+            if 2 * I + a < nx and 2 * J + b < ny:
+                k = west + a * s + 2 * J + b
+                v += mg[_B, k] - _apply(op, mg, _X, k, s)
+        mg[_B, coarse + J] = v
+
+
+@ti.func
+def _coarsen_entry(op: ti.template(), geo: ti.template(), l, r, I, J):
+    """Galerkin operator entry (I, J) of level l + 1, I = -1..mx-1, J = 0..my.
+
+    A coarse face's transmissibility is the sum of those of the fine faces
+    across it: the east face of coarse column I is that of fine column 2 I + 1
+    (nx - 1 if that is the last, on an odd nx), the north face of coarse row J
+    that of fine row 2 J + 1 (likewise); entry (I, my) is the ghost below coarse
+    column I + 1, whose bottom Dirichlet faces are those of fine columns 2 I + 2
+    and 2 I + 3 (held by the fine ghosts below them).
+    """
+    nx, ny, my = geo[l, _NX], geo[l, _NY], geo[l + 1, _NY]
+    c = ti.Vector([0.0, 0.0], dt=ti.f64)
+    if J < my:
+        fi = -1 if I < 0 else ti.min(2 * I + 1, nx - 1)
+        fj = ti.min(2 * J + 1, ny - 1)
+        for a in ti.static((0, 1)):
+            if 2 * J + a < ny:
+                c[_TX] += op[_index(geo, l, r, fi, 2 * J + a)][_TX]
+            if I >= 0 and 2 * I + a < nx:
+                c[_TY] += op[_index(geo, l, r, 2 * I + a, fj)][_TY]
+    else:
+        for a in ti.static((0, 1)):
+            if 2 * I + 2 + a < nx:
+                c[_TY] += op[_index(geo, l, r, 2 * I + 1 + a, ny)][_TY]
+    op[_index(geo, l + 1, r, I, J)] = c
+
+
+@ti.func
+def _dense(geo: ti.template(), l, r, c):
+    """Flat index of cell c = i ny + j of the coarsest level (the numbering of
+    its dense matrix)."""
+    ny = geo[l, _NY]
+    return _index(geo, l, r, c // ny, c % ny)
+
+
+@ti.func
+def _coarse_solve(mg: ti.template(), chol: ti.template(), geo: ti.template(), l, r):
+    """x = A^-1 b on the coarsest level by the Cholesky factor."""
+    m = geo[l, _NX] * geo[l, _NY]
+    for c in range(m):
+        v = mg[_B, _dense(geo, l, r, c)]
+        for q in range(c):
+            v -= chol[r, c, q] * mg[_X, _dense(geo, l, r, q)]
+        mg[_X, _dense(geo, l, r, c)] = v / chol[r, c, c]
+    for t in range(m):
+        c = m - 1 - t
+        v = mg[_X, _dense(geo, l, r, c)]
+        for q in range(c + 1, m):
+            v -= chol[r, q, c] * mg[_X, _dense(geo, l, r, q)]
+        mg[_X, _dense(geo, l, r, c)] = v / chol[r, c, c]
+
+
+@ti.func
+def _lanes(n):
+    """n rounded up to a multiple of _LANES."""
+    return (n + _LANES - 1) // _LANES * _LANES
+
+
+@ti.func
+def _harmonic(k1, k2):
+    h = ti.f64(0.0)
+    if k1 + k2 > 0:
+        h = 2.0 * k1 * k2 / (k1 + k2)
+    return h
+
+
+@ti.func
+def _is_finite(v):
+    """Bit test, immune to fast-math's assumption that no value is NaN or inf."""
+    exponent = ti.i64(0x7FF)
+    return ((ti.bit_cast(v, ti.i64) >> ti.i64(52)) & exponent) != exponent
+
+
+# ---------------------------------------------------------------- set-up kernels
+@ti.kernel
+def _scan(kappa: _Grid, seen: _Rows, connected: _Mask, flags: _Ints):
+    """Count, per realization, the connected cells whose kappa changed since the
+    last call, is zero, or is invalid (negative or not finite); keep a copy."""
+    R, nx, ny = kappa.shape[0], kappa.shape[1], kappa.shape[2]
+    for r in range(R):
+        for c in ti.static((_CHANGED, _ZEROS, _BAD)):
+            flags[r, c] = 0
+    for t in range(R * nx):
+        r, i = t // nx, t % nx
+        changed, zeros, bad = 0, 0, 0
+        for j in range(ny):
+            if connected[i, j] != 0:
+                k = ti.cast(kappa[r, i, j], ti.f64)
+                if not (_is_finite(k) and k >= 0):
+                    bad += 1
+                elif k == 0:
+                    zeros += 1
+                if ti.bit_cast(k, ti.i64) != ti.bit_cast(seen[r, i * ny + j], ti.i64):
+                    changed += 1
+                seen[r, i * ny + j] = k
+        flags[r, _CHANGED] += changed  # integer sums: exact in any order
+        flags[r, _ZEROS] += zeros
+        flags[r, _BAD] += bad
+
+
+@ti.kernel
+def _assemble(kappa: _Grid, unknown: _Cells, sides: _Sides, op: _Ops, cg: _Rows,
+              state: _Rows, geo: _Ints, gx: ti.f64, gy: ti.f64, inflow: ti.f64):
+    """Fine-level operator and the kappa-dependent right-hand side.
+
+    ``gx = dy / (dx eta)``, ``gy = dx / (dy eta)``; ``sides[s, m] = (g, v)``: the
+    Dirichlet conductance per unit permeability of box side ``s`` at position
+    ``m`` (0: wall) and its value minus ``p_ref``. The ``flow_rate`` inflow goes to
+    the inlet cells in proportion to kappa. Cells that are no unknown get 0.
+    """
+    R, nx, ny = kappa.shape[0], kappa.shape[1], kappa.shape[2]
+    for r in range(R):
+        total = ti.f64(0.0)
+        for j in range(ny):
+            if unknown[r, 0, j] != 0:
+                total += ti.cast(kappa[r, 0, j], ti.f64)
+        state[r, _INLET] = total
+    for t in range(R * (nx + 1)):
+        r, i = t // (nx + 1), t % (nx + 1) - 1  # i = -1: the west ghost column
+        for j in range(ny + 1):
+            c = ti.Vector([0.0, 0.0], dt=ti.f64)
+            base = ti.f64(0.0)
+            if j == ny:  # the ghost below column i + 1: its bottom Dirichlet face
+                if i + 1 < nx:  # noqa: SIM102 - Taichi's `and` does not short-circuit
+                    if unknown[r, i + 1, 0] != 0:
+                        c[_TY] = sides[2, i + 1][0] * ti.cast(kappa[r, i + 1, 0], ti.f64)
+            elif i < 0:  # the west ghost: the left Dirichlet face of cell (0, j)
+                if unknown[r, 0, j] != 0:
+                    c[_TX] = sides[0, j][0] * ti.cast(kappa[r, 0, j], ti.f64)
+            elif unknown[r, i, j] != 0:
+                k = ti.cast(kappa[r, i, j], ti.f64)
+                c[_TX] = sides[1, j][0] * k  # on the last column, its right face
+                if i + 1 < nx:
+                    c[_TX] = 0.0
+                    if unknown[r, i + 1, j] != 0:
+                        c[_TX] = gx * _harmonic(k, ti.cast(kappa[r, i + 1, j], ti.f64))
+                c[_TY] = sides[3, i][0] * k  # on the top row, its top face
+                if j + 1 < ny:
+                    c[_TY] = 0.0
+                    if unknown[r, i, j + 1] != 0:
+                        c[_TY] = gy * _harmonic(k, ti.cast(kappa[r, i, j + 1], ti.f64))
+                gv = ti.f64(0.0)
+                for side in ti.static(range(4)):
+                    on_side = (i == 0, i == nx - 1, j == 0, j == ny - 1)[side]
+                    m = (j, j, i, i)[side]
+                    if on_side:
+                        gv += sides[side, m][0] * sides[side, m][1]
+                base = k * gv
+                if i == 0 and state[r, _INLET] > 0:
+                    base += inflow * k / state[r, _INLET]
+            op[_index(geo, 0, r, i, j)] = c
+            if i >= 0 and j < ny:
+                cg[_BASE, _index(geo, 0, r, i, j)] = base
+
+
+@ti.kernel
+def _coarsen(op: _Ops, geo: _Ints, l: ti.i32, R: ti.i32):
+    mx, my = geo[l + 1, _NX], geo[l + 1, _NY]
+    for t in range(R * (mx + 1)):
+        r, I = t // (mx + 1), t % (mx + 1) - 1
+        for J in range(my + 1):
+            _coarsen_entry(op, geo, l, r, I, J)
+
+
+@ti.kernel
+def _factor(op: _Ops, chol: _Chol, geo: _Ints, l: ti.i32):
+    """Dense Cholesky factor (lower) of each realization's coarsest operator; a
+    cell that is no unknown gets an identity row."""
+    R, nx, ny = chol.shape[0], geo[l, _NX], geo[l, _NY]
+    for t in range(R * _TASK):
+        if t % _TASK == 0:
+            _factor_of(op, chol, geo, l, t // _TASK, nx, ny)
+
+
+@ti.func
+def _factor_of(op: ti.template(), chol: ti.template(), geo: ti.template(), l, r, nx, ny):
+    m = nx * ny
+    for c in range(m):
+        for q in range(m):
+            chol[r, c, q] = 0.0
+    for c in range(m):
+        k = _dense(geo, l, r, c)
+        d = _diagonal(op, k, ny + 1)
+        chol[r, c, c] = d if d > 0 else 1.0
+        if c + ny < m:
+            chol[r, c + ny, c] = -op[k][_TX]
+        if (c + 1) % ny != 0:
+            chol[r, c + 1, c] = -op[k][_TY]
+    for c in range(m):
+        v = chol[r, c, c]
+        for q in range(c):
+            v -= chol[r, c, q] * chol[r, c, q]
+        chol[r, c, c] = ti.sqrt(v)
+        for e in range(c + 1, m):
+            w = chol[r, e, c]
+            for q in range(c):
+                w -= chol[r, e, q] * chol[r, c, q]
+            chol[r, e, c] = w / chol[r, c, c]
+
+
+@ti.kernel
+def _copy_rhs(cg: _Rows, geo: _Ints, R: ti.i32):
+    """Right-hand side without carried flux: the kappa-dependent part."""
+    nx, ny = geo[0, _NX], geo[0, _NY]
+    for t in range(R * nx):
+        r, i = t // nx, t % nx
+        for j in range(ny):
+            k = _index(geo, 0, r, i, j)
+            cg[_RHS, k] = cg[_BASE, k]
+
+
+@ti.func
+def _occupied(carried: ti.template(), occupied: ti.template(), r, i, j, given: ti.template()):
+    """1 in a cell inside a particle (``occupied``, or else ``carried != 0``), else 0."""
+    chi = ti.f64(0.0)
+    if ti.static(given):
+        chi = ti.f64(1.0) if occupied[r, i, j] != 0 else ti.f64(0.0)
+    else:
+        if carried[r, i, j, 0] != 0 or carried[r, i, j, 1] != 0:
+            chi = 1.0
+    return chi
+
+
+@ti.kernel
+def _set_carried_rhs(cg: _Rows, carried: _Vectors, occupied: _Grid, connected: _Mask,
+                     unknown: _Cells, geo: _Ints, dx: ti.f64, dy: ti.f64,
+                     given: ti.template()):
+    """Right-hand side with the particles' carried flux (fluid.PressureSolver.solve):
+    each face between two connected cells carries the mean of ``chi v`` over its
+    occupied sides (``given``: ``occupied``; else cells where ``carried != 0``),
+    normal to it, times its length; zero in cells that are no unknown."""
+    R, nx, ny = carried.shape[0], carried.shape[1], carried.shape[2]
+    for t in range(R * nx):
+        r, i = t // nx, t % nx
+        for j in range(ny):
+            k = _index(geo, 0, r, i, j)
+            rhs = ti.f64(0.0)
+            if unknown[r, i, j] != 0:
+                inward, outward = ti.f64(0.0), ti.f64(0.0)
+                # west, south (into the cell), east, north (out of it)
+                for di, dj, comp, length, sign in ti.static(
+                        ((-1, 0, 0, 0, 1), (0, -1, 1, 1, 1), (1, 0, 0, 0, -1), (0, 1, 1, 1, -1))):
+                    i2, j2 = i + di, j + dj
+                    if i2 >= 0 and i2 < nx and j2 >= 0 and j2 < ny:  # noqa: SIM102
+                        if connected[i2, j2] != 0:
+                            chi = (_occupied(carried, occupied, r, i, j, given)
+                                   + _occupied(carried, occupied, r, i2, j2, given))
+                            v = (ti.cast(carried[r, i, j, comp], ti.f64)
+                                 + ti.cast(carried[r, i2, j2, comp], ti.f64))
+                            q = v / ti.max(chi, 1.0) * (dy, dx)[length]
+                            if ti.static(sign == 1):
+                                inward += q
+                            else:
+                                outward += q
+                rhs = cg[_BASE, k] + (inward - outward)
+            cg[_RHS, k] = rhs
+
+
+@ti.kernel
+def _load_guess(x0: _Grid, unknown: _Cells, cg: _Rows, geo: _Ints, p_ref: ti.f64):
+    """The initial guess ``x0 - p_ref``, 0 where that is not finite or no unknown."""
+    R, nx, ny = x0.shape[0], x0.shape[1], x0.shape[2]
+    for t in range(R * nx):
+        r, i = t // nx, t % nx
+        for j in range(ny):
+            v = ti.cast(x0[r, i, j], ti.f64) - p_ref
+            if not (unknown[r, i, j] != 0 and _is_finite(v)):
+                v = 0.0
+            cg[_SOL, _index(geo, 0, r, i, j)] = v
+
+
+# ---------------------------------------------------------------- multigrid kernels
+@ti.func
+def _sweep(h, post):
+    """(colour, reads) of half-sweep h of the pre-smoother, or (``post``) of its
+    adjoint, the post-smoother: red (colour 0, i + j even) first before the
+    coarse correction, black first after it."""
+    colour = h % 2
+    reads = _ZERO if h == 0 else _STORED
+    if post:
+        colour = 1 - colour
+        reads = _CORRECTED if h == 0 else _STORED
+    return ti.Vector([colour, reads])
+
+
+@ti.kernel
+def _smooth(op: _Ops, mg: _Rows, geo: _Ints, flags: _Ints, l: ti.i32, h: ti.i32,
+            post: ti.i32, alpha: ti.f64, cells: ti.template()):
+    """Half-sweep h (see _sweep) of level l, in parallel over column segments (or cells)."""
+    R, nx, ny = flags.shape[0], geo[l, _NX], geo[l, _NY]
+    colour, reads = _sweep(h, post)
+    if ti.static(cells):
+        half = (ny + 1) // 2  # cells of one colour per column, at most
+        span = _lanes(nx * half)
+        for t in range(R * span):
+            r, c = t // span, t % span
+            if c < nx * half and flags[r, _RUNNING]:
+                i = c // half
+                j = (i + colour) % 2 + 2 * (c % half)
+                if j < ny:
+                    _relax_cell(op, mg, geo, l, r, i, j, reads, alpha)
+    else:
+        segments = _segments(ny)
+        for t in range(R * nx * segments):
+            r, i, j0, j1 = _segment(t, nx, ny, segments)
+            if flags[r, _RUNNING]:
+                _relax_row(op, mg, geo, l, r, i, j0, j1, colour, reads, alpha)
+
+
+@ti.kernel
+def _restrict(op: _Ops, mg: _Rows, geo: _Ints, flags: _Ints, l: ti.i32,
+              cells: ti.template()):
+    """The right-hand side of level l + 1 from the residual of level l."""
+    R, mx, my = flags.shape[0], geo[l + 1, _NX], geo[l + 1, _NY]
+    if ti.static(cells):
+        span = _lanes(mx * my)
+        for t in range(R * span):
+            r, c = t // span, t % span
+            if c < mx * my and flags[r, _RUNNING]:
+                _restrict_row(op, mg, geo, l, r, c // my, c % my, c % my + 1)
+    else:
+        segments = _segments(my)
+        for t in range(R * mx * segments):
+            r, I, J0, J1 = _segment(t, mx, my, segments)
+            if flags[r, _RUNNING]:
+                _restrict_row(op, mg, geo, l, r, I, J0, J1)
+
+
+@ti.func
+def _cycle_of(op: ti.template(), mg: ti.template(), chol: ti.template(), geo: ti.template(),
+              r, l0, alpha):
+    """The V-cycle of realization r from level l0 down, serially: smoothing and
+    restriction down to the coarsest level, its solve, correction and smoothing
+    back up (one loop over both ways, so the smoother is compiled once)."""
+    L = geo.shape[0]
+    down = L - 1 - l0
+    for stage in range(2 * down + 1):
+        if stage == down:
+            _coarse_solve(mg, chol, geo, L - 1, r)
+        else:
+            post = 1 if stage > down else 0
+            l = l0 + stage if not post else L - 1 - (stage - down)
+            for h in range(2 * SWEEPS):
+                colour, reads = _sweep(h, post)
+                for i in range(geo[l, _NX]):
+                    _relax_row(op, mg, geo, l, r, i, 0, geo[l, _NY], colour, reads, alpha)
+            if not post:
+                for I in range(geo[l + 1, _NX]):
+                    _restrict_row(op, mg, geo, l, r, I, 0, geo[l + 1, _NY])
+
+
+@ti.kernel
+def _serial_cycle(op: _Ops, mg: _Rows, chol: _Chol, geo: _Ints, flags: _Ints,
+                  l0: ti.i32, alpha: ti.f64):
+    """The V-cycle from level l0 down, one thread per running realization."""
+    for t in range(flags.shape[0] * _TASK):
+        r = t // _TASK
+        if t % _TASK == 0 and flags[r, _RUNNING]:
+            _cycle_of(op, mg, chol, geo, r, l0, alpha)
