@@ -8,10 +8,10 @@ microseconds and the launches cost far more: the paper-like scene ran 1260
 steps/s, about 0.8 ms per step, nearly all of it host overhead.
 
 Here one launch advances every running realization by ``n`` steps. Each
-realization is one task (realizations run in parallel, one per thread); inside
-it the steps, bodies and contacts run serially: forces of every body, then the
-integration of every body, then, when some body has moved half the Verlet skin,
-that realization's own neighbour-list rebuild. Serial order inside a realization
+realization is one task (realizations run in parallel, one per thread; see
+``_TASK``); inside it the steps, bodies and contacts run serially: forces of
+every body, then the integration of every body, then, when some body has moved
+half the Verlet skin, that realization's own neighbour-list rebuild. Serial order inside a realization
 makes the summation order fixed, so a realization's result does not depend on
 what runs beside it, as on the per-step path. The arithmetic is the per-step
 path's own functions (``contact.disk_force``, ``integrate.advance_body``,
@@ -30,6 +30,12 @@ from ..backend import ti  # sets the environment before Taichi loads
 from .contact import disk_force
 from .integrate import advance_body
 from .neighbors import bin_one, list_one
+
+# Taichi's CPU backend hands a parallel loop to its threads in blocks of up to 512
+# iterations, ti.loop_config(block_dim=1) or not: a loop over 10 realizations ran
+# on one thread. So the loop runs _TASK iterations per realization and one of
+# them works (as in fluid/_gmg_cycle.py).
+_TASK = 512
 
 
 @ti.func
@@ -82,52 +88,53 @@ def disk_steps(n_steps: ti.i32, x: ti.types.ndarray(), th: ti.types.ndarray(),
     there), so that the host swaps the two buffers of the whole batch.
     """
     n_part = x.shape[1]
-    ti.loop_config(block_dim=1)  # one realization per task
-    for r in range(x.shape[0]):
-        deepest = max_overlap[r]
-        s = 0
-        stop = 1 - running[r]        # a stopped realization takes no step
-        while s < n_steps and stop == 0:
-            if s % 2 == 0:
-                deepest = ti.max(deepest, _forces(
-                    x, v, w, f, tau, f_fluid, tau_fluid, alive, nbr, nbr_n, sp, rad, mass,
-                    pair, wallp, wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h,
-                    hp_a, hs_a, hp_b, hs_b, slots, flags, dt, r))
-            else:
-                deepest = ti.max(deepest, _forces(
-                    x, v, w, f, tau, f_fluid, tau_fluid, alive, nbr, nbr_n, sp, rad, mass,
-                    pair, wallp, wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h,
-                    hp_b, hs_b, hp_a, hs_a, slots, flags, dt, r))
-            moved = 0
-            for i in range(n_part):
-                if alive[r, i] != 0:
-                    if advance_body(x, th, v, w, f, tau, f_ext, tau_ext, alive, bad, escaped,
-                                    sp, mass, inertia, deq, xi, x_ref, dt, skin, x_escape,
-                                    r, i):
-                        moved = 1
-            s += 1
-            if bad[r] != 0:
-                stop = 1
-            elif moved != 0:
-                builds[r] += 1
-                if bin_one(x, alive, running, cell_n, cell_p, g_ox, g_oy, cs, ncx, ncy, flags,
-                           r):
-                    stop = 1
-                for i in range(n_part):
-                    if list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n,
-                                g_ox, g_oy, cs, skin, ncx, ncy, flags, r, i) > nbr.shape[2]:
-                        stop = 1
-        done[r] = s
-        max_overlap[r] = deepest
-        if s % 2 != n_steps % 2:
-            # the latest history is in the other buffer: copy it where the host looks
-            for i, k, q in ti.ndrange(n_part, hp_a.shape[2], slots):
+    for t in range(x.shape[0] * _TASK):  # one realization per task (_TASK)
+        if t % _TASK == 0:
+            r = t // _TASK
+            deepest = max_overlap[r]
+            s = 0
+            stop = 1 - running[r]        # a stopped realization takes no step
+            while s < n_steps and stop == 0:
                 if s % 2 == 0:
-                    hp_b[r, i, k, q] = hp_a[r, i, k, q]
-                    hs_b[r, i, k, q] = hs_a[r, i, k, q]
+                    deepest = ti.max(deepest, _forces(
+                        x, v, w, f, tau, f_fluid, tau_fluid, alive, nbr, nbr_n, sp, rad, mass,
+                        pair, wallp, wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h,
+                        hp_a, hs_a, hp_b, hs_b, slots, flags, dt, r))
                 else:
-                    hp_a[r, i, k, q] = hp_b[r, i, k, q]
-                    hs_a[r, i, k, q] = hs_b[r, i, k, q]
+                    deepest = ti.max(deepest, _forces(
+                        x, v, w, f, tau, f_fluid, tau_fluid, alive, nbr, nbr_n, sp, rad, mass,
+                        pair, wallp, wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h,
+                        hp_b, hs_b, hp_a, hs_a, slots, flags, dt, r))
+                moved = 0
+                for i in range(n_part):
+                    if alive[r, i] != 0:
+                        if advance_body(x, th, v, w, f, tau, f_ext, tau_ext, alive, bad, escaped,
+                                        sp, mass, inertia, deq, xi, x_ref, dt, skin, x_escape,
+                                        r, i):
+                            moved = 1
+                s += 1
+                if bad[r] != 0:
+                    stop = 1
+                elif moved != 0:
+                    builds[r] += 1
+                    if bin_one(x, alive, running, cell_n, cell_p, g_ox, g_oy, cs, ncx, ncy, flags,
+                               r):
+                        stop = 1
+                    for i in range(n_part):
+                        if list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n,
+                                    g_ox, g_oy, cs, skin, ncx, ncy, flags, r, i) > nbr.shape[2]:
+                            stop = 1
+            done[r] = s
+            max_overlap[r] = deepest
+            if s % 2 != n_steps % 2:
+                # the latest history is in the other buffer: copy it where the host looks
+                for i, k, q in ti.ndrange(n_part, hp_a.shape[2], slots):
+                    if s % 2 == 0:
+                        hp_b[r, i, k, q] = hp_a[r, i, k, q]
+                        hs_b[r, i, k, q] = hs_a[r, i, k, q]
+                    else:
+                        hp_a[r, i, k, q] = hp_b[r, i, k, q]
+                        hs_a[r, i, k, q] = hs_b[r, i, k, q]
 
 
 def run_steps(n: int, bodies, batch, particles, materials, walls, history, neighbors, flags,
