@@ -9,8 +9,12 @@
 
 Cases: disks and squares at packing fractions 0.17 and 0.26 in the vani channel
 (scenes/vani_phi026.toml; squares from scenes/squares.toml with the same count),
-realizations 1, 10, 100; and a paper-like case (the paper's time step 3.75e-7 s and
-a pressure solve every 1e4 steps) to compare with the auto settings in one run.
+realizations 1, 10, 100; a paper-like case (the paper's time step 3.75e-7 s and
+a pressure solve every 1e4 steps) to compare with the auto settings in one run;
+and ``channel-N``, N disks of 100 um in a 12 mm wide converging channel whose
+straight section grows with N (``channel-10000``: 20 mm, 1590 x 720 fluid cells),
+one realization (``channel_overrides``; not in the default list: run them with
+``--cases channel-1000,channel-3000,channel-10000 --sim-time 0.005``).
 A case name may end in ``@key=value`` overrides (as ``--set``), one ``@`` each, to
 time one knob against the default in the same run.
 
@@ -18,9 +22,10 @@ Each case runs in its own process (so peak memory is the case's own), first a fe
 steps to compile, then ``--sim-time`` seconds of simulated time timed as a whole.
 Reported per case: DEM steps per second, surface-node (or disk-pair) contact
 evaluations per second over whole steps, simulated realization-seconds per wall
-second, realization pressure solves per second and the solve's share of wall
-time, peak resident memory of the simulation process and of the pressure-solver
-worker processes (``fluid.workers``).
+second, realization pressure solves per second, the solve's share of wall time
+and time per solve, wall time per step with and without the solves, the solver
+used, peak resident memory of the simulation process and of the pressure-solver
+worker processes (``fluid.workers``, pyamg only).
 """
 import argparse
 import json
@@ -48,9 +53,33 @@ def cases(quick):
     return out
 
 
+# The channel of issue #22: 12 mm wide, a 20 mm straight section holding 10,000
+# disks of 100 um (packing fraction 0.327), 45-degree convergence to 1.7 d, a short
+# outlet; 1590 x 720 fluid cells at d/6. ``channel-N`` scales the straight section
+# with N at the same packing fraction, so the fluid grid grows with N as well.
+CHANNEL_WIDTH = 12e-3
+CHANNEL_LENGTH_10K = 20e-3
+CHANNEL_D = 100e-6
+
+
+def channel_overrides(n):
+    length = CHANNEL_LENGTH_10K * n / 10_000
+    phi = n * 3.141592653589793 * CHANNEL_D ** 2 / 4 / (CHANNEL_WIDTH * length)
+    # the vani scene's upstream speed (flow rate scaled with the width) and H/d 1.15
+    return [f"geometry.width_in={CHANNEL_WIDTH}", f"geometry.length_in={length}",
+            f"geometry.constriction_width={1.7 * CHANNEL_D}",
+            f"geometry.width_out={CHANNEL_WIDTH}", "geometry.length_out=0.6e-3",
+            f"particles.diameter={CHANNEL_D}", f"particles.packing_fraction={phi!r}",
+            "fluid.gap=115e-6", f"fluid.flow_rate={1e-10 * CHANNEL_WIDTH / 1.4e-3 * 115 / 160}"]
+
+
 def overrides(case, sim_time):
     case, *extra = case.split("@")
     parts = case.split("-")
+    if parts[0] == "channel":
+        ov = [f"run.t_end={sim_time}", "run.stop_at_clog=false",
+              f"output.series_interval={SERIES_INTERVAL}"]
+        return ROOT / "scenes" / "vani_phi026.toml", ov + channel_overrides(int(parts[1])) + extra
     paper = parts[0] == "paper"
     if paper:
         parts = parts[1:]
@@ -144,7 +173,7 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
                 evals += int(nbr[r, i] * nodes[i] + nodes[js].sum() + nodes[i])
     solves1, fluid_s1 = (sim.fluid.solves, sim.fluid.seconds) if sim.fluid else (0, 0.0)
     solves = (solves1 - solves0) * sim.R
-    workers = sim.fluid.solver.workers if sim.fluid is not None else 0
+    workers = getattr(sim.fluid.solver, "workers", 0) if sim.fluid is not None else 0
     worker_rss = []
     if workers > 1:
         from taichi_hsdem.fluid import pool as solver_pool
@@ -160,6 +189,12 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
         "realization_sim_s_per_wall_s": round(sim.R * (sim.t - 0.0) / wall, 6),
         "pressure_solves_per_s": round(solves / wall, 2),
         "pressure_share": round((fluid_s1 - fluid_s0) / wall, 3),
+        "ms_per_solve": round(1000 * (fluid_s1 - fluid_s0) / solves, 2) if solves else None,
+        "ms_per_step": round(1000 * wall / steps, 4) if steps else None,
+        # the step without the pressure solves: the DEM's own cost per step
+        "dem_ms_per_step": round(1000 * (wall - (fluid_s1 - fluid_s0)) / steps, 4)
+        if steps else None,
+        "fluid_solver": sim.model.fluid_solver if sim.fluid is not None else None,
         "fluid_workers": workers,
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "worker_peak_rss_mb": worker_rss,

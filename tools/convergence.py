@@ -6,6 +6,7 @@
     python tools/convergence.py escapees [--quick] [--out DIR] [--realizations N]
     python tools/convergence.py paper    [--quick] [--out DIR] [--realizations N]
     python tools/convergence.py interval [--quick] [--out DIR] [--realizations N]
+    python tools/convergence.py solve    [--quick] [--out DIR] [--realizations N]
 
 ``pressure``: the hourglass scene's pressure field (particles as placed) at
 3 ... 12 fluid cells per smallest diameter against a 16-cell reference, sampled at
@@ -39,6 +40,14 @@ point's mean escapees, its change from the 0.5-cell point with a 95 % bootstrap
 interval, and the wall time, in ``interval.csv`` and ``interval.png``;
 ``interval.json`` adds the points up to the default
 (``resolve.UPDATE_CELL_FRACTION``) pooled against the longer ones.
+
+``solve``: how little pressure solving the vani scene needs: the solve
+tolerance (``fluid.solver_tol``, relative residual) and re-solving only when
+more than a fraction of the fluid cells changed permeability
+(``fluid.resolve_fraction``), one knob at a time off the defaults (1e-8, 0), 20
+realizations per point on the same seeds (from 4000): mean escapees with its 95 %
+interval, the paired change from the default with its BCa interval, the solves
+actually done and the wall time, in ``solve.csv`` and ``solve.png``.
 
 ``escapees``: the clogging statistics of the vani scene (mean escapees before a
 clog, censoring-aware, with its 95 % interval) as one knob at a time moves off its
@@ -309,6 +318,10 @@ def _sweep(study, points, folder, n, seed, quick):
     common = {"run.realizations": n, "run.seed": seed}
     if quick:
         common["run.t_end"] = 0.3
+    # compile (or load) every kernel first, so that no point's wall time holds it
+    from taichi_hsdem import Simulation, load_scene
+    Simulation(load_scene(ROOT / "scenes" / "vani_phi026.toml",
+                          [f"run.realizations={n}", "run.t_end=0.01"])).run()
     rows = run_sweep(ROOT / "scenes" / "vani_phi026.toml", points, folder, common=common,
                      progress=lambda m: print(m, file=sys.stderr))
     bad = [r for r in rows if r["status"] not in ("ran", "skipped", "unstable")]
@@ -483,6 +496,66 @@ def _compare_paper(path, auto, paper):
           file=sys.stderr)
 
 
+SOLVE_KNOBS = (
+    ("solve tolerance (solver_tol)", "fluid.solver_tol", (1e-4, 1e-6, 1e-10)),
+    ("re-solve above a changed fraction (resolve_fraction)", "fluid.resolve_fraction",
+     (0.01, 0.05, 0.1)),
+)
+SOLVE_DEFAULTS = {"fluid.solver_tol": 1e-8, "fluid.resolve_fraction": 0.0}
+
+
+def _solves_done(folder, r):
+    """Pressure solves (batch solves of all realizations) of a sweep point."""
+    summary = json.loads((folder / r["folder"] / "summary.json").read_text())
+    return summary["fluid"]["solves"] if summary.get("fluid") else None
+
+
+def solve_study(out, quick, realizations=None):
+    n = realizations or (2 if quick else 20)
+    folder = out / ("solve-quick" if quick else "solve")
+    points = [{}] + [{key: v} for _, key, values in SOLVE_KNOBS for v in values]
+    sweep_rows = _sweep("solve", points, folder, n, 4000, quick)
+    pts = [_point(folder, r) for r in sweep_rows]
+    default = pts[0]
+    rows = []
+    for _, key, _values in SOLVE_KNOBS:
+        for r, pt in zip(sweep_rows, pts):
+            if r["overrides"] and key not in r["overrides"]:
+                continue
+            value = r["overrides"].get(key, SOLVE_DEFAULTS[key])
+            if pt is default or not pt["escapees"] or not default["escapees"]:
+                diff, lo, hi = (0.0, 0.0, 0.0) if pt is default else (None, None, None)
+            else:
+                diff, (lo, hi) = _paired_difference(default, pt)
+            rows.append(_row(key, value, pt) + [diff, lo, hi, _solves_done(folder, r)])
+    header = (["knob", "value"] + ROW_HEADER
+              + ["change_from_default", "change_ci_lo", "change_ci_hi", "pressure_solves"])
+    csv_path = _write(out, "solve", header, rows)
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for k, (label, key, _) in enumerate(SOLVE_KNOBS):
+        sel = sorted((r for r in rows if r[0] == key), key=lambda r: r[9])
+        xs, ys, lo, hi = _mean_ci_columns(sel)
+        ax.errorbar(xs * (1 + 0.02 * k), ys, yerr=[ys - lo, hi - ys], fmt="o-", capsize=3,
+                    label=label)
+        for x, y, r in zip(xs, ys, sel):
+            tag = "default" if r[1] == SOLVE_DEFAULTS[key] else f"{r[1]:g}"
+            ax.annotate(tag, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xlabel("wall seconds per simulated realization-second")
+    ax.set_ylabel("mean escapees before a clog <s> (95 % interval)")
+    ax.set_title(f"vani scene: pressure solve tolerance and skipped re-solves, "
+                 f"{n} realizations per point", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "solve.png", dpi=120)
+    plt.close(fig)
+    return rows, csv_path, out / "solve.png"
+
+
 def _escapee_chart(out, rows, n):
     import matplotlib
     matplotlib.use("Agg")
@@ -516,13 +589,13 @@ def _escapee_chart(out, rows, n):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("study", choices=("pressure", "contact", "timestep", "escapees", "paper",
-                                      "interval"))
+                                      "interval", "solve"))
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default=str(ROOT / "runs" / "convergence"))
     p.add_argument("--realizations", type=int, default=None,
                    help="escapees: realizations per point (default 20, --quick 2); "
                         "paper: per setting (default 60); interval: per point "
-                        "(default 100)")
+                        "(default 100); solve: per point (default 20)")
     a = p.parse_args(argv)
     if a.study == "escapees":
         rows, csv_path, png = escapee_study(Path(a.out), a.quick, a.realizations)
@@ -530,6 +603,8 @@ def main(argv=None):
         rows, csv_path, png = paper_study(Path(a.out), a.quick, a.realizations)
     elif a.study == "interval":
         rows, csv_path, png = interval_study(Path(a.out), a.quick, a.realizations)
+    elif a.study == "solve":
+        rows, csv_path, png = solve_study(Path(a.out), a.quick, a.realizations)
     else:
         study = {"pressure": pressure_study, "contact": contact_study,
                  "timestep": timestep_study}[a.study]
