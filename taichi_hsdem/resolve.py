@@ -33,10 +33,11 @@ MIN_LS_CELLS_PER_DIAMETER = 5.0
 MIN_FLUID_CELLS_ACROSS_CONSTRICTION = 3.0
 # Surface nodes and level sets that follow the shape ("auto"; README, Accuracy):
 PAPER_NODES = 40              # the paper's count: "auto" spaces nodes at most perimeter / 40
-NODE_WIDTH_FRACTION = 0.5     # and at most this fraction of the thinnest part of any
+NODE_WIDTH_FRACTION = 1.0     # and at most this fraction of the thinnest part of any
                               # particle of the scene, so an arm that thin crossing an
-                              # outline holds two of its nodes; spaced wider than the
-                              # whole thinnest part, an explicit count is refused
+                              # outline meets one of its nodes (finer changes no force
+                              # of tools/convergence.py contact's concave cases);
+                              # spaced wider, an explicit count is refused
 LS_DIAMETER_CELLS = 40.0      # "auto" level-set spacing: at most d_eq / 40 ...
 LS_THINNEST_CELLS = 8.0       # ... and at most the thinnest part / 8
 MIN_LS_THINNEST_CELLS = 2.0   # refused: fewer cells across the thinnest part
@@ -153,10 +154,11 @@ def auto_node_spacing(shape: shp.Shape, thinnest: float, depth: float,
                       thinnest_of: str = "") -> tuple[float, str]:
     """``nodes = "auto"``: the largest node spacing that hides nothing, and why.
 
-    At most ``perimeter / PAPER_NODES`` (the paper's count, where the contact
-    study puts the knee for level-set disks), at most ``NODE_WIDTH_FRACTION`` of
-    ``thinnest`` (the thinnest part of any particle of the scene: an arm that
-    thin crossing this outline meets two of its nodes), and for a circle at most
+    At most ``perimeter / PAPER_NODES`` (the paper's count), at most
+    ``NODE_WIDTH_FRACTION`` of ``thinnest`` (the thinnest part of any particle of
+    the scene: an arm that thin crossing this outline meets one of its nodes; two
+    thin arms can then not lie across each other unseen by both, and finer
+    spacings change no force of the concave contact study), and for a circle at most
     the spacing whose sagitta is ``depth`` (the overlap target: the surface
     between two nodes lies no deeper). Every vertex, convex or concave, is a node
     and every edge is split into equal intervals, so short edges and concave
@@ -165,9 +167,9 @@ def auto_node_spacing(shape: shp.Shape, thinnest: float, depth: float,
     """
     rules = [(shape.perimeter / PAPER_NODES, f"perimeter / {PAPER_NODES} (the paper's count)"),
              (NODE_WIDTH_FRACTION * thinnest,
-              f"{NODE_WIDTH_FRACTION:g} x the thinnest part of the scene's particles "
-              f"({thinnest:.4g}{thinnest_of}): an arm that thin crossing the outline meets "
-              f"{1 / NODE_WIDTH_FRACTION:g} nodes")]
+              ("" if NODE_WIDTH_FRACTION == 1 else f"{NODE_WIDTH_FRACTION:g} x ")
+              + f"the thinnest part of the scene's particles ({thinnest:.4g}{thinnest_of}): "
+              "an arm that thin crossing the outline meets a node")]
     if shape.kind == "circle" and depth < shape.radius:
         rules.append((2.0 * shape.radius * math.acos(1.0 - depth / shape.radius),
                       "the surface between two nodes no deeper than contact.overlap_target"))
@@ -643,7 +645,7 @@ def _check_nodes(res: _Resolution, scene: Scene, k: int, sp, t: shp.Shape,
     j = int(np.argmin(widths))
     gap = node_gap(t)
     if gap > widths[j]:
-        need = len(shp.respaced(t, NODE_WIDTH_FRACTION * widths[j]).nodes)
+        need = len(shp.respaced(t, min(NODE_WIDTH_FRACTION, 1.0) * widths[j]).nodes)
         res.bad(f"{key}.nodes", f"{sp.nodes} surface nodes leave {gap:.3g} of outline "
                 f"between two nodes, more than the thinnest part of the scene's particles "
                 f"({widths[j]:.3g}, particles[{j}]): an arm that thin can cross the outline "

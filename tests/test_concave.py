@@ -141,32 +141,37 @@ def test_respaced_regular_polygons_have_equal_faces():
 
 
 def test_auto_nodes_and_grid_follow_the_thinnest_part():
-    # Ls with stars whose arms are 0.207 wide: nodes at most 0.104 apart on every
-    # edge of both (half the stars' arm), grids at d_eq / 40 (the star's arm spans
-    # 8.45 cells); a disk alone keeps the paper's 40 nodes.
-    scene = arena_scene([dict(L_SPECIES), {"shape": "polygon", "vertices": star().tolist(),
-                                           "count": 1}])
-    m = resolve(load_scene(scene))
-    w = sh.thinnest_width(sh.polygon(star()))
+    # Ls with the issue's stars (arms 0.207 wide): the paper's spacing, perimeter /
+    # 40, is finer than the arm, so both keep it (the L 42 nodes: its edges of 1.4,
+    # 0.45 and 0.95 in 10, 4 and 7 equal intervals), grids at d_eq / 40 (the arm
+    # spans 8.45 cells).
+    star_sp = {"shape": "polygon", "vertices": star().tolist(), "count": 1}
+    m = resolve(load_scene(arena_scene([dict(L_SPECIES), star_sp])))
+    assert [len(s.shape.nodes) for s in m.species] == [42, 40]
+    assert all("paper" in m.notes[f"particles.{k}.nodes"] for k in (0, 1))
+    assert m.scene.particles[0].nodes == 42             # written into the resolved scene
     for s in m.species:
-        assert node_gap(s.shape) <= 0.5 * w + 1e-12
         assert s.ls_spacing == pytest.approx(s.d_eq / 40)
-    assert [len(s.shape.nodes) for s in m.species] == [58, 80]
-    assert "thinnest part" in m.notes["particles.0.nodes"] and "particles[1]" in \
-        m.notes["particles.0.nodes"]
-    assert m.scene.particles[0].nodes == 58             # written into the resolved scene
+    # stars with arms of 0.092 (r_in 0.15): every outline of the scene gets nodes at
+    # most an arm apart, and the star a grid of 8 cells across its arm
+    thin = dict(star_sp, vertices=star(r_in=0.15).tolist())
+    m = resolve(load_scene(arena_scene([dict(L_SPECIES), thin])))
+    w = sh.thinnest_width(sh.polygon(star(r_in=0.15)))
+    for s in m.species:
+        assert node_gap(s.shape) <= w * (1 + 1e-3)
+    assert [len(s.shape.nodes) for s in m.species] == [64, 140]
+    note = m.notes["particles.0.nodes"]
+    assert "thinnest part" in note and "particles[1]" in note
+    s = m.species[1]
+    assert s.ls_spacing == pytest.approx(w / 8) and s.ls_spacing < s.d_eq / 40
+    # a disk keeps the paper's 40 nodes
     disk = resolve(load_scene(arena_scene([{"shape": "circle", "diameter": 1.0,
                                             "count": 1}], fast_path=False)))
     assert len(disk.species[0].shape.nodes) == 40 and "paper" in disk.notes["particles.0.nodes"]
-    # a much thinner star: its grid is refined to 8 cells across the arm
-    thin = resolve(load_scene(arena_scene([{"shape": "polygon", "count": 1,
-                                            "vertices": star(r_in=0.15).tolist()}])))
-    s = thin.species[0]
-    assert s.ls_spacing == pytest.approx(sh.thinnest_width(s.shape) / 8)
-    assert s.ls_spacing < s.d_eq / 40
 
 
 def test_too_sparse_nodes_and_grid_for_a_thin_arm_refused():
+    # 6 nodes (the vertices) leave 1.4 between two, more than the star's arm (0.207)
     species = [dict(L_SPECIES, nodes=6), {"shape": "polygon", "vertices": star().tolist(),
                                          "count": 1}]
     with pytest.raises(SceneError) as err:

@@ -479,8 +479,9 @@ def respaced(shape, spacing) -> Shape:
 
 def _intervals(length: float, spacing: float) -> int:
     # the allowance keeps a length that is a whole number of spacings (a perimeter
-    # / 40) from gaining an interval to round-off
-    return int(math.ceil(length / spacing - 1e-9))
+    # / 40) from gaining an interval to round-off, or to the few digits a scene
+    # file gives its vertices in (a regular star's edges then differ by 1e-5)
+    return int(math.ceil(length / spacing - 1e-3))
 
 
 def transform(points_body, x, theta) -> np.ndarray:
