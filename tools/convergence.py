@@ -24,7 +24,11 @@ error against the time of one contact step. Two more references split the
 error: the same nodes with the exact distance (:func:`node_law_disks`; what is
 left is the level-set grid's error, charted against the spacing in
 ``contact-grid.png``) and the law's many-node limit (what is left is the node
-discretisation).
+discretisation). Then the concave cases (:func:`concave_cases`: a star's tip on an
+L's face, a star's tip in another star's notch, a disk in an L's inner corner) as
+the ``auto`` node spacing (a fraction of the scene's thinnest part) and level-set
+grid (cells across it) move off their defaults: the force along the press over
+``kn delta`` and across it, in ``contact-concave.csv`` and ``contact-concave.png``.
 
 ``paper``: the auto defaults against the paper's settings (time step 3.75e-7 s, a
 pressure solve every 1e4 steps) on the vani scene, 60 realizations each by

@@ -470,18 +470,19 @@ def respaced(shape, spacing) -> Shape:
     """
     h = check_positive("spacing", spacing)
     if shape.kind == "circle":
-        return circle(2.0 * shape.radius, max(3, _intervals(shape.perimeter, h)))
+        return circle(2.0 * shape.radius, max(3, int(_intervals(shape.perimeter, h))))
     edges = np.hypot(*(np.roll(shape.vertices, -1, axis=0) - shape.vertices).T)
-    counts = np.array([max(1, _intervals(length, h)) for length in edges])
+    counts = _intervals(edges, h)
     return _polygon_shape(shape.vertices, int(counts.sum()), shape.name, centred=True,
                           counts=counts)
 
 
-def _intervals(length: float, spacing: float) -> int:
+def _intervals(length, spacing):
+    """Equal intervals at most ``spacing`` long in ``length`` (array-wise), at least 1."""
     # the allowance keeps a length that is a whole number of spacings (a perimeter
     # / 40) from gaining an interval to round-off, or to the few digits a scene
     # file gives its vertices in (a regular star's edges then differ by 1e-5)
-    return int(math.ceil(length / spacing - 1e-3))
+    return np.maximum(1, np.ceil(np.asarray(length) / spacing - 1e-3).astype(int))
 
 
 def transform(points_body, x, theta) -> np.ndarray:
@@ -778,19 +779,28 @@ def _polygon_shape(vertices, n_nodes, name, centred=False, counts=None) -> Shape
 
 
 def _edge_counts(lengths, n) -> np.ndarray:
-    """Split ``n`` sub-intervals over edges in proportion to their lengths.
+    """Split ``n`` sub-intervals over edges: each edge in equal intervals, the
+    split at the largest spacing ``s`` whose ``max(1, ceil(length / s))`` per edge
+    makes at most ``n`` (what `respaced` gives at that spacing, so that a resolved
+    scene's count rebuilds the nodes ``"auto"`` chose), the rest, if ``n`` is not
+    such a total, one each to the edges with the longest intervals.
 
-    Largest-remainder rounding with at least one interval per edge, so that
-    every vertex is a node and the spacing is as even as whole numbers allow.
+    Every vertex is a node, the spacing is as even as whole numbers allow, and
+    equal edges get equal counts whenever ``n`` allows (a regular polygon at a
+    multiple of its vertex count).
     """
-    ideal = n * lengths / lengths.sum()
-    counts = np.maximum(np.floor(ideal).astype(int), 1)
+    lengths = np.asarray(lengths, dtype=float)
+    # the spacings at which some edge's count changes, longest first
+    k = np.arange(1, n + 1)
+    candidates = np.unique((lengths[:, None] / k[None]).ravel())[::-1]
+    counts = np.ones(len(lengths), dtype=int)
+    for spacing in candidates:
+        trial = _intervals(lengths, spacing)
+        if trial.sum() > n:
+            break
+        counts = trial
     while counts.sum() < n:
-        counts[np.argmax(ideal - counts)] += 1
-    # Reached only when the one-per-edge floor overshot: take back from the
-    # edges furthest above their share.
-    while counts.sum() > n:
-        counts[np.argmax(np.where(counts > 1, counts - ideal, -np.inf))] -= 1
+        counts[np.argmax(lengths / counts)] += 1
     return counts
 
 
