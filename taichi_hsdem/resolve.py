@@ -412,7 +412,8 @@ def _resolve(scene: Scene, arch: str) -> Model:
         templates = [species_shape(sp) for sp in scene.particles]
     except ValueError as exc:
         raise SceneError([f"{src}: particles: {exc}"]) from None
-    templates = _auto_nodes(res, scene, templates, budget)
+    widths = [shp.thinnest_width(t) for t in templates]   # do not depend on the nodes
+    templates = _auto_nodes(res, scene, templates, widths, budget)
     d_eq = [t.equivalent_diameter for t in templates]
     d_min, d_max = min(d_eq), max(d_eq)
     all_disks = scene.contact.disk_fast_path and all(t.kind == "circle" for t in templates)
@@ -504,7 +505,7 @@ def _resolve(scene: Scene, arch: str) -> Model:
             res.note(f"particles.{k}.count", count, f"packing fraction "
                      f"{sp.packing_fraction:g} of the control volume x in "
                      f"[{region[0]:g}, {region[1]:g}]")
-        _check_nodes(res, scene, k, sp, t, templates)
+        _check_nodes(res, scene, k, sp, t, widths)
         depth = f.gap if f.gap else 1.0
         mass = res.derived(f"mass of particles[{k}]", lambda: sp.density * t.area * depth,
                            f"{key}.density, {_size_keys(k, sp)}, fluid.gap", "kg",
@@ -512,7 +513,7 @@ def _resolve(scene: Scene, arch: str) -> Model:
         inertia = res.derived(f"moment of inertia of particles[{k}]",
                               lambda: mass * t.inertia_per_mass,
                               f"{key}.density, {_size_keys(k, sp)}, fluid.gap", "kg m^2")
-        ls = _ls_spacing(res, k, sp, t, all_disks)
+        ls = _ls_spacing(res, k, sp, t, widths[k], all_disks)
         xi = _damping(res, scene, sp, kp, kappa_free, k)
         species.append(Species(name=sp.name, shape=t, count=count, density=sp.density,
                                mass=mass, inertia=inertia, d_eq=t.equivalent_diameter, kn=0.0,
@@ -589,12 +590,12 @@ def _resolve(scene: Scene, arch: str) -> Model:
 
 
 def _auto_nodes(res: _Resolution, scene: Scene, templates: list[shp.Shape],
-                budget) -> list[shp.Shape]:
-    """The templates with ``nodes = "auto"`` respaced (:func:`auto_node_spacing`),
-    each choice recorded with its reason."""
+                widths: list[float], budget) -> list[shp.Shape]:
+    """The templates with ``nodes = "auto"`` respaced (:func:`auto_node_spacing`;
+    ``widths``: each template's thinnest part), each choice recorded with its
+    reason."""
     if all(sp.nodes != AUTO for sp in scene.particles):
         return templates
-    widths = [shp.thinnest_width(t) for t in templates]
     j = int(np.argmin(widths))
     out = []
     for k, (sp, t) in enumerate(zip(scene.particles, templates)):
@@ -622,10 +623,13 @@ def _auto_nodes(res: _Resolution, scene: Scene, templates: list[shp.Shape],
 
 
 def _check_nodes(res: _Resolution, scene: Scene, k: int, sp, t: shp.Shape,
-                 templates: list[shp.Shape]) -> None:
-    """Refuse a node count that hides surface between nodes: a circle's arc sunk
-    deeper than the overlap target, or a stretch wider than the thinnest part of
-    the scene's particles (an arm that thin could cross it unseen by its nodes)."""
+                 widths: list[float]) -> None:
+    """Refuse a given node count that hides surface between nodes: a circle's arc
+    sunk deeper than the overlap target, or a stretch wider than the thinnest part
+    of the scene's particles (``widths``, per template: an arm that thin could
+    cross it unseen by its nodes). ``"auto"`` meets both by construction."""
+    if sp.nodes == AUTO:
+        return
     key = f"particles[{k}]"
     target = scene.contact.overlap_target * t.equivalent_diameter
     hidden = node_sagitta(t)
@@ -639,9 +643,6 @@ def _check_nodes(res: _Resolution, scene: Scene, k: int, sp, t: shp.Shape,
                 f"contact.overlap_target ({scene.contact.overlap_target:g} d); use about "
                 f"{need} nodes or more")
         return
-    if sp.nodes == AUTO:
-        return
-    widths = [shp.thinnest_width(s) for s in templates]
     j = int(np.argmin(widths))
     gap = node_gap(t)
     if gap > widths[j]:
@@ -652,12 +653,13 @@ def _check_nodes(res: _Resolution, scene: Scene, k: int, sp, t: shp.Shape,
                 f"there with no node inside it; use about {need} nodes or more, or \"auto\"")
 
 
-def _ls_spacing(res: _Resolution, k: int, sp, t: shp.Shape, all_disks: bool) -> float:
+def _ls_spacing(res: _Resolution, k: int, sp, t: shp.Shape, w: float,
+                all_disks: bool) -> float:
     """Level-set spacing of species ``k``: given, or ``"auto"``: ``d_eq /
-    LS_DIAMETER_CELLS`` and ``LS_THINNEST_CELLS`` cells across the thinnest part;
-    one too coarse for either is refused."""
+    LS_DIAMETER_CELLS`` and ``LS_THINNEST_CELLS`` cells across the thinnest part
+    ``w``; one too coarse for either is refused."""
     key = f"particles[{k}]"
-    d, w = t.equivalent_diameter, shp.thinnest_width(t)
+    d = t.equivalent_diameter
     if sp.ls_spacing == AUTO:
         ls = min(d / LS_DIAMETER_CELLS, w / LS_THINNEST_CELLS)
         if all_disks:

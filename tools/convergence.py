@@ -394,6 +394,12 @@ def _concave_chart(out, rows, default, depth):
                 if col == 3:
                     ax.annotate(f"{r[1]:g}", (r[col], r[5]), textcoords="offset points",
                                 xytext=(4, 4), fontsize=7)
+            if col == 3:            # the finest point, both rules at once
+                for r in rows:
+                    if r[0] == name and (r[1], r[2]) == CONCAVE_REFERENCE:
+                        ax.plot(r[3], r[5], "x", ms=8, color=line.get_color())
+                        ax.annotate(f"{r[1]:g}, {r[2]:g} cells", (r[3], r[5]),
+                                    textcoords="offset points", xytext=(-30, -12), fontsize=7)
         ax.set_xlabel(label, fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("force along the press / (kn delta)")
