@@ -23,7 +23,7 @@ from .geometry.placement import check_initial, count_for_fraction
 from .laws import free_permeability, harmonic_mean, kozeny_carman, restitution_factor
 from .limits import Part
 from .scene import Scene, SceneError
-from .scene.keys import MAX_PACKING_FRACTION
+from .scene.keys import AUTO, MAX_PACKING_FRACTION, shape_vertex_count
 
 # Resolution limits: below these a particle (or the constriction) is not seen by
 # the grid that has to represent it.
@@ -31,6 +31,16 @@ MIN_FLUID_CELLS_PER_DIAMETER = 2.0
 MIN_WALL_CELLS_PER_DIAMETER = 4.0
 MIN_LS_CELLS_PER_DIAMETER = 5.0
 MIN_FLUID_CELLS_ACROSS_CONSTRICTION = 3.0
+# Surface nodes and level sets that follow the shape ("auto"; README, Accuracy):
+PAPER_NODES = 40              # the paper's count: "auto" spaces nodes at most perimeter / 40
+NODE_WIDTH_FRACTION = 1.0     # and at most this fraction of the thinnest part of any
+                              # particle of the scene, so an arm that thin crossing an
+                              # outline meets one of its nodes (finer changes no force
+                              # of tools/convergence.py contact's concave cases);
+                              # spaced wider, an explicit count is refused
+LS_DIAMETER_CELLS = 40.0      # "auto" level-set spacing: at most d_eq / 40 ...
+LS_THINNEST_CELLS = 8.0       # ... and at most the thinnest part / 8
+MIN_LS_THINNEST_CELLS = 2.0   # refused: fewer cells across the thinnest part
 # Bytes per surface node of a template (positions, lengths, normals, boundary vectors).
 NODE_BYTES = 64
 # Derived numbers must lie this far inside the kernels' float range.
@@ -121,18 +131,57 @@ class Model:
         return {"kind": "flow_rate", "Q": f.flow_rate, "p_out": f.p_out}
 
 
-def species_shape(sp) -> shp.Shape:
-    """The shape template of one species table of a scene."""
+def species_shape(sp, spacing: float | None = None) -> shp.Shape:
+    """The shape template of one species table of a scene; ``nodes = "auto"``: at
+    most ``spacing`` apart on every edge (:func:`auto_node_spacing`), or without a
+    spacing the paper's count (a provisional template to measure the shape on)."""
     n = sp.nodes
+    if n == AUTO:
+        n = max(PAPER_NODES, shape_vertex_count(sp.shape, sp.to_dict()))
     if sp.shape == "circle":
-        return shp.circle(sp.diameter, n)
-    if sp.shape == "square":
-        return shp.square(sp.side, n)
-    if sp.shape == "rectangle":
-        return shp.rectangle(sp.width, sp.height, n)
-    if sp.shape == "regular_polygon":
-        return shp.regular_polygon(sp.n_vertices, sp.diameter, n)
-    return shp.polygon(np.asarray(sp.vertices, dtype=float), n)
+        t = shp.circle(sp.diameter, n)
+    elif sp.shape == "square":
+        t = shp.square(sp.side, n)
+    elif sp.shape == "rectangle":
+        t = shp.rectangle(sp.width, sp.height, n)
+    elif sp.shape == "regular_polygon":
+        t = shp.regular_polygon(sp.n_vertices, sp.diameter, n)
+    else:
+        t = shp.polygon(np.asarray(sp.vertices, dtype=float), n)
+    if sp.nodes == AUTO and spacing is not None:
+        t = shp.respaced(t, spacing)
+    return t
+
+
+def auto_node_spacing(shape: shp.Shape, thinnest: float, depth: float,
+                      thinnest_of: str = "") -> tuple[float, str]:
+    """``nodes = "auto"``: the largest node spacing that hides nothing, and why.
+
+    At most ``perimeter / PAPER_NODES`` (the paper's count), at most
+    ``NODE_WIDTH_FRACTION`` of ``thinnest`` (the thinnest part of any particle of
+    the scene: an arm that thin crossing this outline meets one of its nodes; two
+    thin arms can then not lie across each other unseen by both, and finer
+    spacings change no force of the concave contact study), and for a circle at most
+    the spacing whose sagitta is ``depth`` (the overlap target: the surface
+    between two nodes lies no deeper). Every vertex, convex or concave, is a node
+    and every edge is split into equal intervals, so short edges and concave
+    corners are seen and a regular polygon's faces get equal counts.
+    ``thinnest_of`` names the particle that ``thinnest`` belongs to, for the reason.
+    """
+    rules = [(shape.perimeter / PAPER_NODES, f"perimeter / {PAPER_NODES} (the paper's count)"),
+             (NODE_WIDTH_FRACTION * thinnest,
+              ("" if NODE_WIDTH_FRACTION == 1 else f"{NODE_WIDTH_FRACTION:g} x ")
+              + f"the thinnest part of the scene's particles ({thinnest:.4g}{thinnest_of}): "
+              "an arm that thin crossing the outline meets a node")]
+    if shape.kind == "circle" and depth < shape.radius:
+        rules.append((2.0 * shape.radius * math.acos(1.0 - depth / shape.radius),
+                      "the surface between two nodes no deeper than contact.overlap_target"))
+    return min(rules, key=lambda r: r[0])
+
+
+def node_gap(shape: shp.Shape) -> float:
+    """The longest stretch of outline between two consecutive surface nodes."""
+    return float(np.hypot(*(np.roll(shape.nodes, -1, axis=0) - shape.nodes).T).max())
 
 
 def _geometry(g) -> wl.Geometry:
@@ -357,14 +406,17 @@ def _resolve(scene: Scene, arch: str) -> Model:
     budget = limits.available_memory()
     # Shapes: surface nodes are arrays of the node count, before anything is built.
     for k, sp in enumerate(scene.particles):
-        part = Part(f"particles[{k}].nodes", f"a template of {sp.nodes} surface nodes",
-                    sp.nodes * NODE_BYTES, "use far fewer (40 to a few hundred)")
-        res.problems += limits.memory_problems([part], src, budget)
+        if sp.nodes != AUTO:
+            part = Part(f"particles[{k}].nodes", f"a template of {sp.nodes} surface nodes",
+                        sp.nodes * NODE_BYTES, "use far fewer (40 to a few hundred)")
+            res.problems += limits.memory_problems([part], src, budget)
     res.stop_if_bad()
     try:
         templates = [species_shape(sp) for sp in scene.particles]
     except ValueError as exc:
         raise SceneError([f"{src}: particles: {exc}"]) from None
+    widths = [shp.thinnest_width(t) for t in templates]   # do not depend on the nodes
+    templates = _auto_nodes(res, scene, templates, widths, budget)
     d_eq = [t.equivalent_diameter for t in templates]
     d_min, d_max = min(d_eq), max(d_eq)
     all_disks = scene.contact.disk_fast_path and all(t.kind == "circle" for t in templates)
@@ -456,17 +508,7 @@ def _resolve(scene: Scene, arch: str) -> Model:
             res.note(f"particles.{k}.count", count, f"packing fraction "
                      f"{sp.packing_fraction:g} of the control volume x in "
                      f"[{region[0]:g}, {region[1]:g}]")
-        hidden = node_sagitta(t)
-        if hidden > scene.contact.overlap_target * t.equivalent_diameter:
-            need = sp.nodes
-            while need < 100000 and node_sagitta(species_shape(sp.replace(nodes=need))) > \
-                    scene.contact.overlap_target * t.equivalent_diameter:
-                need *= 2
-            res.bad(f"{key}.nodes", f"{sp.nodes} surface nodes leave up to {hidden:.3g} "
-                    f"({hidden / t.equivalent_diameter:.3g} d) of the surface between two "
-                    f"nodes, where another body can sink unseen: more than "
-                    f"contact.overlap_target ({scene.contact.overlap_target:g} d); use about "
-                    f"{need} nodes or more")
+        _check_nodes(res, scene, k, sp, t, widths)
         depth = f.gap if f.gap else 1.0
         mass = res.derived(f"mass of particles[{k}]", lambda: sp.density * t.area * depth,
                            f"{key}.density, {_size_keys(k, sp)}, fluid.gap", "kg",
@@ -474,16 +516,7 @@ def _resolve(scene: Scene, arch: str) -> Model:
         inertia = res.derived(f"moment of inertia of particles[{k}]",
                               lambda: mass * t.inertia_per_mass,
                               f"{key}.density, {_size_keys(k, sp)}, fluid.gap", "kg m^2")
-        ls = t.equivalent_diameter / 40.0 if sp.ls_spacing == "auto" else sp.ls_spacing
-        if sp.ls_spacing != "auto" and ls > t.equivalent_diameter / MIN_LS_CELLS_PER_DIAMETER:
-            res.bad(f"{key}.ls_spacing", f"{ls:g} is too coarse for a particle of d = "
-                    f"{t.equivalent_diameter:g}: use at most d/{MIN_LS_CELLS_PER_DIAMETER:g}")
-        if all_disks:
-            res.note(f"particles.{k}.ls_spacing", ls, "not used: disks take the analytic path")
-        elif sp.ls_spacing == "auto":
-            res.note(f"particles.{k}.ls_spacing", ls, "d_eq / 40")
-        else:
-            res.values[f"particles.{k}.ls_spacing"] = ls
+        ls = _ls_spacing(res, k, sp, t, widths[k], all_disks)
         xi = _damping(res, scene, sp, kp, kappa_free, k)
         species.append(Species(name=sp.name, shape=t, count=count, density=sp.density,
                                mass=mass, inertia=inertia, d_eq=t.equivalent_diameter, kn=0.0,
@@ -558,6 +591,101 @@ def _resolve(scene: Scene, arch: str) -> Model:
         _resolve_intervals(model, res.values, res.notes)
     model.scene = scene.with_values(res.values)
     return model
+
+
+def _auto_nodes(res: _Resolution, scene: Scene, templates: list[shp.Shape],
+                widths: list[float], budget) -> list[shp.Shape]:
+    """The templates with ``nodes = "auto"`` respaced (:func:`auto_node_spacing`;
+    ``widths``: each template's thinnest part), each choice recorded with its
+    reason."""
+    if all(sp.nodes != AUTO for sp in scene.particles):
+        return templates
+    j = int(np.argmin(widths))
+    out = []
+    for k, (sp, t) in enumerate(zip(scene.particles, templates)):
+        if sp.nodes != AUTO:
+            out.append(t)
+            continue
+        depth = scene.contact.overlap_target * t.equivalent_diameter
+        thin = f", particles[{j}]" if len(templates) > 1 else ""
+        spacing, why = auto_node_spacing(t, widths[j], depth, thin)
+        count = (t.perimeter / spacing if t.kind == "circle" else
+                 np.ceil(np.hypot(*(np.roll(t.vertices, -1, axis=0) - t.vertices).T)
+                         / spacing).sum())
+        part = Part(f"particles[{k}].nodes", f'a template of {count:.3g} surface nodes ("auto")',
+                    count * NODE_BYTES, "give a count (40 to a few hundred), or make the "
+                    "scene's thinnest particle less thin against this one")
+        res.problems += limits.memory_problems([part], scene.source, budget)
+        res.stop_if_bad()
+        t = shp.respaced(t, spacing)
+        res.note(f"particles.{k}.nodes", len(t.nodes),
+                 f"at most {spacing:.4g} apart on every edge: {why}"
+                 + ("" if t.kind == "circle" else "; every vertex a node, each edge in "
+                    "equal intervals"))
+        out.append(t)
+    return out
+
+
+def _check_nodes(res: _Resolution, scene: Scene, k: int, sp, t: shp.Shape,
+                 widths: list[float]) -> None:
+    """Refuse a given node count that hides surface between nodes: a circle's arc
+    sunk deeper than the overlap target, or a stretch wider than the thinnest part
+    of the scene's particles (``widths``, per template: an arm that thin could
+    cross it unseen by its nodes). ``"auto"`` meets both by construction."""
+    if sp.nodes == AUTO:
+        return
+    key = f"particles[{k}]"
+    target = scene.contact.overlap_target * t.equivalent_diameter
+    hidden = node_sagitta(t)
+    if hidden > target:
+        need = sp.nodes
+        while need < 100000 and node_sagitta(species_shape(sp.replace(nodes=need))) > target:
+            need *= 2
+        res.bad(f"{key}.nodes", f"{sp.nodes} surface nodes leave up to {hidden:.3g} "
+                f"({hidden / t.equivalent_diameter:.3g} d) of the surface between two "
+                f"nodes, where another body can sink unseen: more than "
+                f"contact.overlap_target ({scene.contact.overlap_target:g} d); use about "
+                f"{need} nodes or more")
+        return
+    j = int(np.argmin(widths))
+    gap = node_gap(t)
+    if gap > widths[j]:
+        need = len(shp.respaced(t, min(NODE_WIDTH_FRACTION, 1.0) * widths[j]).nodes)
+        res.bad(f"{key}.nodes", f"{sp.nodes} surface nodes leave {gap:.3g} of outline "
+                f"between two nodes, more than the thinnest part of the scene's particles "
+                f"({widths[j]:.3g}, particles[{j}]): an arm that thin can cross the outline "
+                f"there with no node inside it; use about {need} nodes or more, or \"auto\"")
+
+
+def _ls_spacing(res: _Resolution, k: int, sp, t: shp.Shape, w: float,
+                all_disks: bool) -> float:
+    """Level-set spacing of species ``k``: given, or ``"auto"``: ``d_eq /
+    LS_DIAMETER_CELLS`` and ``LS_THINNEST_CELLS`` cells across the thinnest part
+    ``w``; one too coarse for either is refused."""
+    key = f"particles[{k}]"
+    d = t.equivalent_diameter
+    if sp.ls_spacing == AUTO:
+        ls = min(d / LS_DIAMETER_CELLS, w / LS_THINNEST_CELLS)
+        if all_disks:
+            res.note(f"particles.{k}.ls_spacing", ls, "not used: disks take the analytic path")
+        elif ls < d / LS_DIAMETER_CELLS:
+            res.note(f"particles.{k}.ls_spacing", ls, f"thinnest part ({w:.4g}) / "
+                     f"{LS_THINNEST_CELLS:g}: finer than d_eq / {LS_DIAMETER_CELLS:g}")
+        else:
+            res.note(f"particles.{k}.ls_spacing", ls, f"d_eq / {LS_DIAMETER_CELLS:g} (the "
+                     f"thinnest part, {w:.4g}, spans {w / ls:.3g} cells, at least "
+                     f"{LS_THINNEST_CELLS:g})")
+        return ls
+    ls = float(sp.ls_spacing)
+    if ls > d / MIN_LS_CELLS_PER_DIAMETER:
+        res.bad(f"{key}.ls_spacing", f"{ls:g} is too coarse for a particle of d = "
+                f"{d:g}: use at most d/{MIN_LS_CELLS_PER_DIAMETER:g}")
+    elif ls > w / MIN_LS_THINNEST_CELLS:
+        res.bad(f"{key}.ls_spacing", f"{ls:g} is too coarse for the thinnest part of the "
+                f"particle ({w:.3g} across): use at most {w / MIN_LS_THINNEST_CELLS:.3g} "
+                f"({MIN_LS_THINNEST_CELLS:g} cells across it), or \"auto\"")
+    res.values[f"particles.{k}.ls_spacing"] = ls
+    return ls
 
 
 def _damping(res: _Resolution, scene: Scene, sp, kp: float, kappa_free: float, k: int) -> float:
@@ -665,7 +793,8 @@ def _memory_parts(scene: Scene, species: list[Species], all_disks: bool, wall_h:
             per = (2 * s.shape.bounding_radius / s.ls_spacing + 8) ** 2
             parts.append(Part(f"particles[{k}].ls_spacing", f"the level set of particles[{k}] "
                               f"({per:.3g} nodes)", per * limits.LEVEL_SET_NODE_BYTES,
-                              "use ls_spacing of d_eq / 40 (\"auto\") or coarser"))
+                              "use ls_spacing = \"auto\" (d_eq / 40, finer only for thin "
+                              "parts) or coarser"))
     if fluid_cells:
         parts.append(Part("fluid.cell_size", f"the fluid grid ({fluid_cells:.3g} cells)",
                           fluid_cells * limits.FLUID_CELL_BYTES,

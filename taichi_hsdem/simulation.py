@@ -329,8 +329,9 @@ class Simulation:
             elif bad[r] & BAD_FAST:
                 reason = "a particle moved more than a quarter of its size in one step"
             elif bad[r] & BAD_PASSED:
-                reason = ("a particle's centre ended up inside another: it passed through "
-                          "between surface nodes; raise the particles' nodes or lower run.dt")
+                reason = ("a particle's deepest point ended up inside another: it passed "
+                          "through between surface nodes; raise the particles' nodes (or "
+                          "use \"auto\") or lower run.dt")
             elif overlap[r] > sc.contact.overlap_limit:
                 reason = (f"overlap reached {overlap[r]:.3g} of a particle diameter "
                           f"(limit contact.overlap_limit = {sc.contact.overlap_limit:g})")

@@ -123,7 +123,7 @@ def test_file_scene_values_and_defaults(tmp_path):
     first, squares = scene.particles
     assert first.name == "species0" and squares.name == "squares"
     assert first.friction == 0.25 and squares.friction == 0.4
-    assert first.kn == "auto" and first.ks == "auto" and first.nodes == 40
+    assert first.kn == "auto" and first.ks == "auto" and first.nodes == "auto"
     assert first.restitution == 0.5 and first.side is None
     assert squares.count == 10 and squares.packing_fraction is None
     assert first.d_eq() == pytest.approx(3e-5)
@@ -711,5 +711,5 @@ def test_nonsense_values():
         "<dict>: geometry.length: expected a number > 0, got None",
         '<dict>: output.video: expected true or false, got string "🎬"',
         '<dict>: particles[0].diameter: expected a number > 0, got string "∞"',
-        "<dict>: particles[0].nodes: expected an integer >= 3, got number 40.5",
+        "<dict>: particles[0].nodes: expected an integer >= 3 or \"auto\", got number 40.5",
     ]

@@ -25,7 +25,11 @@ error against the time of one contact step. Two more references split the
 error: the same nodes with the exact distance (:func:`node_law_disks`; what is
 left is the level-set grid's error, charted against the spacing in
 ``contact-grid.png``) and the law's many-node limit (what is left is the node
-discretisation).
+discretisation). Then the concave cases (:func:`concave_cases`: a star's tip on an
+L's face, a star's tip in another star's notch, a disk in an L's inner corner) as
+the ``auto`` node spacing (a fraction of the scene's thinnest part) and level-set
+grid (cells across it) move off their defaults: the force along the press over
+``kn delta`` and across it, in ``contact-concave.csv`` and ``contact-concave.png``.
 
 ``paper``: the auto defaults against the paper's settings (time step 3.75e-7 s, a
 pressure solve every 1e4 steps) on the vani scene, 60 realizations each by
@@ -251,6 +255,170 @@ def contact_study(out, quick):
             "mean |F_ls / F_exact distance - 1|",
             f"level-set grid error, disk pair at overlap {depth} d (normalize=True)")
     return rows, csv_path, png
+
+
+# Concave contacts: the "auto" rules of resolve.py at other constants. Node
+# spacing at most perimeter / 40 and at most `fraction` x the scene's thinnest
+# part (auto: resolve.NODE_WIDTH_FRACTION); level-set spacing at most d_eq / 40
+# and at most the thinnest part / `cells` (auto: resolve.LS_THINNEST_CELLS).
+CONCAVE_FRACTIONS = (2.0, 1.0, 0.5, 0.25, 0.125)
+CONCAVE_CELLS = (4, 8, 16, 32)
+CONCAVE_REFERENCE = (1 / 16, 64)          # the finest point, both rules at once
+CONCAVE_SAMPLES = 8
+
+
+def concave_cases():
+    """The concave contacts of the study, in units of 100 um: (name, species, the
+    pose of the second body as a function of its offset, the pressing direction).
+
+    * ``star-tip/L-face``: a ten-point star (arms 0.207 wide) driving a tip into the
+      outer face of an L's arm (0.45 x 1.4), at an offset along the face;
+    * ``star/star-notch``: a star's tip in another star's notch, turned a little;
+    * ``disk/L-corner``: a level-set disk (d 0.3) in an L's inner corner, turned.
+    """
+    L = [[0.0, 0.0], [1.4, 0.0], [1.4, 0.45], [0.45, 0.45], [0.45, 1.4], [0.0, 1.4]]
+    a = np.pi * np.arange(20) / 10
+    r = np.where(np.arange(20) % 2 == 0, 0.7, 0.35)
+    star = np.column_stack([r * np.cos(a), r * np.sin(a)]).tolist()
+    L_sp = {"shape": "polygon", "vertices": L, "count": 1}
+    star_sp = {"shape": "polygon", "vertices": star, "count": 1}
+    disk_sp = {"shape": "circle", "diameter": 0.3, "count": 1}
+    return [
+        # the L's bottom face at y = 4.5 - 0.508 (centroid at (10, 5)); the star
+        # below with a tip pointing up (+y: theta = pi/2), slid along the face
+        ("star-tip/L-face", [L_sp, star_sp], lambda u: ((0.45 + 0.4 * u, np.pi / 2),),
+         (0.0, 1.0)),
+        # a tip of the second star (turned pi/10 + a little) into the first one's
+        # notch at angle pi/10, pressed along it
+        ("star/star-notch", [star_sp, star_sp],
+         lambda u: ((0.0, np.pi / 10 + 0.02 * (2 * u - 1) + np.pi),), None),
+        ("disk/L-corner", [L_sp, disk_sp], lambda u: ((0.0, 2 * np.pi * u),),
+         (-1.0 / np.sqrt(2), -1.0 / np.sqrt(2))),
+    ]
+
+
+def _press(sim, shapes, name, offset_angle, direction, depth):
+    """Put the second body in contact with the first (at (10, 5), unturned) and
+    pressed ``depth`` into it along ``direction``; the force on it along the press."""
+    from taichi_hsdem.geometry import shapes as sh
+    a, b = shapes
+    xa = np.array([10.0, 5.0])
+    offset, theta = offset_angle
+    if name == "star-tip/L-face":
+        start = xa + [offset, -4.0]
+    elif name == "star/star-notch":
+        u = np.array([np.cos(np.pi / 10), np.sin(np.pi / 10)])
+        start, direction = xa + 4.0 * u, -u
+    else:                                    # disk/L-corner: from inside the notch
+        inner = xa + (np.array([0.45, 0.45]) + a.vertices[0])
+        start = inner + 2.0 * np.array([1.0, 1.0])
+    d = np.asarray(direction, dtype=float)
+    lo, hi = 0.0, 4.0                       # along d from `start`: apart at lo, overlapping at hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if sh.overlaps(a, xa, 0.0, b, start + mid * d, theta):
+            hi = mid
+        else:
+            lo = mid
+    xb = start + (lo + depth) * d
+    sim.set_state([[xa, xb]], theta=[[0.0, theta]])
+    sim.step(1)
+    f, _ = sim.forces()
+    return float(-f[0, 1] @ d), float(abs(f[0, 1, 0] * d[1] - f[0, 1, 1] * d[0]))
+
+
+def concave_contact_study(out, quick):
+    """The concave cases of `concave_cases` pressed 0.02 d_eq (of the smaller body)
+    at `CONCAVE_SAMPLES` offsets, as the auto node rule's width fraction and the
+    grid's cells across the thinnest part move one at a time off the defaults, up
+    to `CONCAVE_REFERENCE`: the force along the press over ``kn delta`` (mean, least
+    and most over the offsets), the force across it, and the change from the
+    defaults, against the surface nodes and the time of one step."""
+    from conftest import arena_scene, make_sim
+    from taichi_hsdem import resolve as rs
+    kn, depth = 1.0e4, 0.02
+    fractions = (2.0, 1.0, 0.5, 0.25) if quick else CONCAVE_FRACTIONS
+    cells = (4, 8, 16) if quick else CONCAVE_CELLS
+    samples = 3 if quick else CONCAVE_SAMPLES
+    default = (rs.NODE_WIDTH_FRACTION, rs.LS_THINNEST_CELLS)
+    settings = [(f, default[1]) for f in fractions] + \
+        [(default[0], c) for c in cells if c != default[1]] + [CONCAVE_REFERENCE]
+    settings = list(dict.fromkeys([default] + settings))
+    rng = np.random.default_rng(1)
+    offsets = rng.uniform(0, 1, samples)
+    rows = []
+    for name, species, pose, direction in concave_cases():
+        forces = {}
+        for f, c in settings:
+            rs.NODE_WIDTH_FRACTION, rs.LS_THINNEST_CELLS = f, c
+            try:
+                sim = make_sim(arena_scene([dict(sp) for sp in species], kn=kn, fast_path=False,
+                                           contact__overlap_target=0.2))
+            finally:
+                rs.NODE_WIDTH_FRACTION, rs.LS_THINNEST_CELLS = default
+            shapes = [s.shape for s in sim.model.species]
+            d = min(s.equivalent_diameter for s in shapes)
+            fl = np.array([_press(sim, shapes, name, pose(u)[0], direction, depth * d)
+                           for u in offsets]) / (kn * depth * d)
+            forces[(f, c)] = fl[:, 0]
+            t0 = time.perf_counter()
+            sim.step(100)
+            per_step = (time.perf_counter() - t0) / 100
+            rows.append([name, f, c, sum(len(s.shape.nodes) for s in sim.model.species),
+                         min(s.ls_spacing for s in sim.model.species), float(fl[:, 0].mean()),
+                         float(fl[:, 0].min()), float(fl[:, 0].max()), float(fl[:, 1].mean()),
+                         _rel_error(fl[:, 0], forces[default]), per_step, (f, c) == default])
+    csv_path = _write(out, "contact-concave", ["case", "node_width_fraction",
+                                               "ls_cells_across_thinnest", "nodes_of_pair",
+                                               "ls_spacing_min", "force_over_kn_delta",
+                                               "force_min", "force_max", "lateral_over_kn_delta",
+                                               "change_from_default", "step_wall_s",
+                                               "is_default"], rows)
+    png = _concave_chart(out, rows, default, depth)
+    return rows, csv_path, png
+
+
+def _concave_chart(out, rows, default, depth):
+    """Force along the press (band: least to most over the offsets) against the
+    nodes of the pair (left, grid at its default) and the level-set cells across
+    the thinnest part (right, nodes at their default); the default ringed."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), sharey=True)
+    for ax, col, keep, label in ((axes[0], 3, lambda r: r[2] == default[1],
+                                  "surface nodes of the pair (labels: node spacing / "
+                                  "thinnest part)"),
+                                 (axes[1], 2, lambda r: r[1] == default[0],
+                                  "level-set cells across the thinnest part")):
+        for name in dict.fromkeys(r[0] for r in rows):
+            sel = sorted((r for r in rows if r[0] == name and keep(r)), key=lambda r: r[col])
+            xs = [r[col] for r in sel]
+            line, = ax.semilogx(xs, [r[5] for r in sel], "o-", label=name)
+            ax.fill_between(xs, [r[6] for r in sel], [r[7] for r in sel], alpha=0.15,
+                            color=line.get_color())
+            for r in sel:
+                if r[11]:
+                    ax.plot(r[col], r[5], "o", ms=12, mfc="none", color="k")
+                if col == 3:
+                    ax.annotate(f"{r[1]:g}", (r[col], r[5]), textcoords="offset points",
+                                xytext=(4, 4), fontsize=7)
+            if col == 3:            # the finest point, both rules at once
+                for r in rows:
+                    if r[0] == name and (r[1], r[2]) == CONCAVE_REFERENCE:
+                        ax.plot(r[3], r[5], "x", ms=8, color=line.get_color())
+                        ax.annotate(f"{r[1]:g}, {r[2]:g} cells", (r[3], r[5]),
+                                    textcoords="offset points", xytext=(-30, -12), fontsize=7)
+        ax.set_xlabel(label, fontsize=8)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("force along the press / (kn delta)")
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"concave contacts pressed {depth} d (band: over offsets; ringed: the "
+                 "defaults)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out / "contact-concave.png", dpi=120)
+    plt.close(fig)
+    return out / "contact-concave.png"
 
 
 def _rel_error(values, refs):
@@ -609,6 +777,10 @@ def main(argv=None):
         study = {"pressure": pressure_study, "contact": contact_study,
                  "timestep": timestep_study}[a.study]
         rows, csv_path, png = study(Path(a.out), a.quick)
+        if a.study == "contact":
+            more, csv2, png2 = concave_contact_study(Path(a.out), a.quick)
+            rows = rows + more
+            csv_path, png = f"{csv_path}, {csv2}", f"{png}, {png2}"
     for r in rows:
         print(", ".join(f"{v:.4g}" if isinstance(v, float) else str(v) for v in r))
     print(f"wrote {csv_path} and {png}", file=sys.stderr)

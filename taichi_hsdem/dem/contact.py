@@ -81,10 +81,11 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                 bad: ti.types.ndarray(), max_overlap: ti.types.ndarray(),
                 nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
                 sp: ti.types.ndarray(), mass: ti.types.ndarray(), deq: ti.types.ndarray(),
-                pair: ti.types.ndarray(), wallp: ti.types.ndarray(),
+                rb: ti.types.ndarray(), pair: ti.types.ndarray(), wallp: ti.types.ndarray(),
                 ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(),
                 ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
                 node_pos: ti.types.ndarray(), node_meta: ti.types.ndarray(),
+                inside: ti.types.ndarray(),
                 wall: ti.types.ndarray(), wall_grad: ti.types.ndarray(),
                 wall_shape: ti.types.ndarray(), wall_ox: float, wall_oy: float, wall_h: float,
                 hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
@@ -92,9 +93,16 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                 flags: ti.types.ndarray(), dt: float, normalize: ti.i32):
     """Add every contact force and moment acting on each body (level-set path).
 
-    A body whose centre lies inside a neighbour has passed through it between
-    surface nodes (too few nodes for the speed or the shapes): the realization is
-    flagged ``BAD_PASSED`` rather than allowed to go on with bodies inside bodies.
+    A body whose inside point (the deepest point of its template, ``inside``:
+    not its centre of mass, which an L-shape's notch holds) lies inside a
+    neighbour has passed through it between surface nodes (too few nodes for the
+    speed or the shapes): the realization is flagged ``BAD_PASSED`` rather than
+    allowed to go on with bodies inside bodies. A body resting in another's notch
+    does not trip it: the neighbour would have to sink in by the whole inscribed
+    radius.
+
+    Pairs whose bounding circles do not meet are skipped (no node of one can be
+    inside the other), and so is a node outside the other body's bounding circle.
     """
     n_part = x.shape[1]
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
@@ -108,6 +116,8 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
         wi = w[r, i]
         noff_i = node_meta[ti_, 0]
         nn_i = node_meta[ti_, 1]
+        pole_i = node_world(inside, ti_, xi, ci, si)
+        rb_i = rb[i]
         for k in range(nn_i):
             for s in ti.static(range(slots)):
                 hp_new[r, i, k, s] = 0
@@ -120,6 +130,9 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                 continue
             tj = sp[j]
             xj = x[r, j]
+            rb_j = rb[j]
+            if (xi - xj).norm() >= rb_i + rb_j:
+                continue
             cj = ti.cos(th[r, j])
             sj = ti.sin(th[r, j])
             vj = v[r, j]
@@ -130,8 +143,8 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             mu = pair[a, b, PAIR_MU]
             meff = mass[i] * mass[j] / (mass[i] + mass[j])
             gamma = pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
-            centre, _ = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, tj, rot_t(cj, sj, xi - xj))
-            if centre < 0.0:
+            held, _ = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, tj, rot_t(cj, sj, pole_i - xj))
+            if held < 0.0:
                 ti.atomic_or(bad[r], BAD_PASSED)
             # (a) nodes of i inside j: force on i, history owned by i.
             fa = vec2(0.0, 0.0)
@@ -139,6 +152,8 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             na = 0
             for k in range(nn_i):
                 p = node_world(node_pos, noff_i + k, xi, ci, si)
+                if (p - xj).norm() >= rb_j:
+                    continue
                 qb = rot_t(cj, sj, p - xj)
                 phi, g = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, tj, qb)
                 if phi < 0.0 and g.norm() > 0.0:
@@ -158,6 +173,8 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
             noff_j = node_meta[tj, 0]
             for k in range(node_meta[tj, 1]):
                 p = node_world(node_pos, noff_j + k, xj, cj, sj)
+                if (p - xi).norm() >= rb_i:
+                    continue
                 qb = rot_t(ci, si, p - xi)
                 phi, g = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, ti_, qb)
                 if phi < 0.0 and g.norm() > 0.0:
@@ -322,6 +339,6 @@ def add_forces(bodies, batch, particles, materials, templates, walls, history, n
         t = templates
         ls_contacts(b.x, b.theta, b.v, b.omega, b.force, b.torque, b.alive, batch.running,
                     batch.bad, batch.max_overlap, nl.nbr, nl.nbr_n, p.species, p.mass,
-                    p.d_eq, m.pair, m.wall, t.ls_phi, t.ls_grad, t.ls_meta, t.ls_geo,
-                    t.node_pos, t.node_meta, *wall, hp_old, hs_old, hp_new, hs_new,
+                    p.d_eq, p.bounding_radius, m.pair, m.wall, t.ls_phi, t.ls_grad, t.ls_meta,
+                    t.ls_geo, t.node_pos, t.node_meta, t.inside, *wall, hp_old, hs_old, hp_new, hs_new,
                     history.slots, flags, dt, int(normalize))

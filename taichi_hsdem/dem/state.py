@@ -151,8 +151,11 @@ class Templates:
     """Every template's level-set grid in one flat array (``ls_meta[t]``: offset,
     nx, ny; ``ls_geo[t]``: origin x, origin y, spacing) with its central-difference
     gradient; surface nodes in body frame (``node_meta[t]``: offset, count) with
-    their outward boundary vectors ``node_area``; ``is_circle`` and ``radius`` for
-    the templates that are exact circles."""
+    their outward boundary vectors ``node_area``; ``inside`` (T, 2) the point
+    deepest inside each template (:func:`~taichi_hsdem.geometry.shapes.inside_point`,
+    not its centroid, which a concave body may not contain), the one the "passed
+    through" check tests; ``is_circle`` and ``radius`` for the templates that are
+    exact circles."""
     ls_phi: object
     ls_grad: object
     ls_meta: object
@@ -160,6 +163,7 @@ class Templates:
     node_pos: object
     node_area: object
     node_meta: object
+    inside: object
     is_circle: object
     radius: object
     node_count: np.ndarray
@@ -183,6 +187,7 @@ class Templates:
                                                    for s in sp])),
                    node_meta=array(np.column_stack([stk["node_offset"], stk["node_count"]]),
                                    ti.i32),
+                   inside=array(np.array([shp.inside_point(s.shape)[0] for s in sp])),
                    is_circle=array(stk["is_circle"], ti.i32), radius=array(stk["radius"]),
                    node_count=np.asarray(stk["node_count"]))
 

@@ -9,7 +9,11 @@ what the rest of the method needs (MODEL.md section 1):
 * surface nodes spaced evenly along the outline, each with the length of boundary
   it stands for and its outward normal (contact and fluid forces act there);
 * the exact signed distance (negative inside), which :mod:`.levelset` samples on
-  the grids the contact kernels read.
+  the grids the contact kernels read;
+* what the stability checks and the ``auto`` node and grid rules need to know of
+  any outline, convex or not: a point surely inside it (`inside_point`, the
+  centroid of a concave body may lie outside it), its thinnest part
+  (`thinnest_width`), and nodes at a given spacing (`respaced`).
 
 Everything here is plain numpy and runs on the host: once per template, and
 for `overlaps`, once per candidate pair when particles are placed. The kernels
@@ -38,6 +42,9 @@ __all__ = [
     "regular_polygon",
     "polygon",
     "signed_distance",
+    "inside_point",
+    "thinnest_width",
+    "respaced",
     "transform",
     "to_body",
     "overlaps",
@@ -48,6 +55,10 @@ __all__ = [
 # this close count as touching, not overlapping, so that shapes placed edge to
 # edge by a rotation (cos(pi/2) is 6e-17, not 0) are not refused.
 _REL_TOL = 1.0e-9
+
+# A vertex that turns the outline inwards by at least this many degrees is a
+# concave corner for `thinnest_width` (not the gentle turns of a concave arc).
+CONCAVE_TURN = 20.0
 
 # Bound on the (points x edges) temporaries of the polygon distance, so that a
 # fine level-set grid does not allocate gigabytes at once.
@@ -342,6 +353,138 @@ def signed_distance(shape, points) -> np.ndarray:
     return out.reshape(p.shape[:-1])
 
 
+def inside_point(shape, rel_tol: float = 1e-4) -> tuple[np.ndarray, float]:
+    """The point deepest inside a shape (its pole of inaccessibility, the centre of
+    its largest inscribed circle) and its depth, body frame.
+
+    A concave body's centroid can lie outside it (an L's lies in its notch), so the
+    "passed through" check tests this point instead: another body can hold it only
+    once it has sunk into this one by the whole inscribed radius. The centroid is
+    kept when no point is deeper by more than ``rel_tol`` of the size, so symmetric
+    shapes answer their centre exactly.
+
+    Parameters
+    ----------
+    shape : Shape
+    rel_tol : float, optional
+        Depth resolution of the search, relative to the outline's size.
+
+    Returns
+    -------
+    point : ndarray of shape (2,)
+    depth : float
+        ``-signed_distance(shape, point)``, > 0.
+
+    Examples
+    --------
+    >>> L = polygon([[0, 0], [3, 0], [3, 1], [1, 1], [1, 3], [0, 3]])
+    >>> float(signed_distance(L, [0.0, 0.0])) > 0    # its centroid is in the notch
+    True
+    >>> p, depth = inside_point(L)
+    >>> round(depth, 3), bool(signed_distance(L, p) < 0)    # 2 - sqrt(2)
+    (0.586, True)
+    """
+    if shape.kind == "circle":
+        return np.zeros(2), float(shape.radius)
+    v = shape.vertices
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    size = float((hi - lo).max())
+    tol = rel_tol * size
+    best, depth = np.zeros(2), float(-signed_distance(shape, np.zeros(2)))
+    # Best-first over a quadtree (polylabel): a cell of half-size r can hold no
+    # point deeper than its centre's depth plus r sqrt(2); keep only the cells
+    # that could beat the best by more than tol.
+    half = size / 32.0
+    nx, ny = (np.ceil((hi - lo) / (2 * half)).astype(int) + 1)
+    gx = lo[0] + half * (2 * np.arange(nx) + 1)
+    gy = lo[1] + half * (2 * np.arange(ny) + 1)
+    cells = np.stack(np.meshgrid(gx, gy, indexing="ij"), axis=-1).reshape(-1, 2)
+    while len(cells):
+        d = -signed_distance(shape, cells)
+        k = int(np.argmax(d))
+        if d[k] > depth + tol:
+            best, depth = cells[k].copy(), float(d[k])
+        cells = cells[d + half * math.sqrt(2.0) > depth + tol]
+        half *= 0.5
+        cells = (cells[:, None, :] + half * np.array([[-1, -1], [1, -1], [-1, 1], [1, 1]])
+                 ).reshape(-1, 2)
+    return best, depth
+
+
+def thinnest_width(shape) -> float:
+    """Width of the thinnest part of a shape: the diameter of its largest inscribed
+    circle, or the shortest chord through its inside from a concave corner across
+    to the far side, when shorter (an arm's width, the neck between two notches);
+    a circle's diameter.
+
+    Concave corners are vertices that turn the outline inwards by at least
+    `CONCAVE_TURN` degrees: the gentle turns of a concave arc drawn as a polygon
+    (a crescent's inner edge) do not count, so the width of a tapering horn or a
+    sharp tip, which narrows to nothing, is not taken for the shape's.
+
+    Examples
+    --------
+    >>> thinnest_width(polygon([[0, 0], [3, 0], [3, 1], [1, 1], [1, 3], [0, 3]]))
+    1.0
+    >>> thinnest_width(rectangle(2.0, 0.5))
+    0.5
+    """
+    point, depth = inside_point(shape)
+    best = 2.0 * depth
+    if shape.kind == "circle":
+        return best
+    v = shape.vertices
+    nv = len(v)
+    a, ab = v, np.roll(v, -1, axis=0) - v
+    before = np.roll(ab, 1, axis=0)      # the edge into vertex i; ab[i] leaves it
+    angle = np.degrees(np.arctan2(cross(before, ab), np.sum(before * ab, axis=1)))
+    size = float(np.ptp(v, axis=0).max())
+    for i in np.flatnonzero(angle <= -CONCAVE_TURN):
+        # closest point of every edge that does not end at vertex i
+        t = np.clip(np.sum((v[i] - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
+        c = a + t[:, None] * ab
+        dist = np.hypot(*(c - v[i]).T)
+        dist[[i, (i - 1) % nv]] = np.inf
+        for e in np.argsort(dist):
+            if dist[e] >= best:
+                break
+            # a chord, not a path along the outline or across a notch
+            pts = v[i] + np.linspace(0.0, 1.0, 9)[1:-1, None] * (c[e] - v[i])
+            if np.all(signed_distance(shape, pts) < -1e-9 * size):
+                best = float(dist[e])
+                break
+    return best
+
+
+def respaced(shape, spacing) -> Shape:
+    """The same outline with surface nodes at most ``spacing`` apart: every edge of
+    a polygon gets ``ceil(length / spacing)`` equal intervals (so equal edges, as
+    on a regular polygon, get equal counts), a circle ``ceil(perimeter / spacing)``.
+
+    Examples
+    --------
+    >>> len(respaced(regular_polygon(6, 2.0), 6.0 / 40).nodes)   # 7 per face
+    42
+    >>> len(respaced(circle(1.0), np.pi / 40).nodes)
+    40
+    """
+    h = check_positive("spacing", spacing)
+    if shape.kind == "circle":
+        return circle(2.0 * shape.radius, max(3, int(_intervals(shape.perimeter, h))))
+    edges = np.hypot(*(np.roll(shape.vertices, -1, axis=0) - shape.vertices).T)
+    counts = _intervals(edges, h)
+    return _polygon_shape(shape.vertices, int(counts.sum()), shape.name, centred=True,
+                          counts=counts)
+
+
+def _intervals(length, spacing):
+    """Equal intervals at most ``spacing`` long in ``length`` (array-wise), at least 1."""
+    # the allowance keeps a length that is a whole number of spacings (a perimeter
+    # / 40) from gaining an interval to round-off, or to the few digits a scene
+    # file gives its vertices in (a regular star's edges then differ by 1e-5)
+    return np.maximum(1, np.ceil(np.asarray(length) / spacing - 1e-3).astype(int))
+
+
 def transform(points_body, x, theta) -> np.ndarray:
     """Body-frame points to world frame: rotate by ``theta`` (CCW), then translate by ``x``.
 
@@ -408,8 +551,8 @@ def overlaps(shape_a, xa, ta, shape_b, xb, tb, gap=0.0) -> bool:
     disjoint polygons is reached at a vertex of one of them, so this is exact
     for ``gap > 0``, and testing both ways catches a corner driven into a face),
     the midpoints of its edges' pieces between the other's vertices lying on
-    them (outlines that share part of an edge, at ``gap = 0``) and its centroid
-    when that lies inside it (identical placement). The answer does not depend
+    them (outlines that share part of an edge, at ``gap = 0``) and its
+    `inside_point` (identical placement). The answer does not depend
     on the number of surface nodes.
 
     Outlines that touch to within round-off (1e-9 of the bounding radii) do not
@@ -457,13 +600,11 @@ def overlaps(shape_a, xa, ta, shape_b, xb, tb, gap=0.0) -> bool:
     if segments_intersect(va[:, None], ends_a[:, None], vb[None], ends_b[None], tol,
                           touching=False).any():
         return True
-    for s, v, x, other, vo, xo, to in (
-        (shape_a, va, xa, shape_b, vb, xb, tb),
-        (shape_b, vb, xb, shape_a, va, xa, ta),
+    for s, v, x, t, other, vo, xo, to in (
+        (shape_a, va, xa, ta, shape_b, vb, xb, tb),
+        (shape_b, vb, xb, tb, shape_a, va, xa, ta),
     ):
-        probes = [v, _piece_midpoints(v, vo, tol)]
-        if signed_distance(s, np.zeros(2)) < 0:
-            probes.append(x[None])
+        probes = [v, _piece_midpoints(v, vo, tol), transform(inside_point(s)[0], x, t)[None]]
         if signed_distance(other, to_body(np.vstack(probes), xo, to)).min() < limit:
             return True
     return False
@@ -600,9 +741,11 @@ def _check_outline(vertices) -> np.ndarray:
     return v
 
 
-def _polygon_shape(vertices, n_nodes, name, centred=False) -> Shape:
+def _polygon_shape(vertices, n_nodes, name, centred=False, counts=None) -> Shape:
     """Shape from an outline; ``centred``: the outline's centroid is the origin
-    by symmetry, so skip the shift that would only add round-off to it."""
+    (by symmetry, or already shifted), so skip the shift that would only add
+    round-off to it; ``counts``: node intervals per edge (default: ``n_nodes``
+    spread by `_edge_counts`)."""
     v = _check_outline(vertices)
     n = _node_count(n_nodes)
     if n < len(v):
@@ -619,7 +762,7 @@ def _polygon_shape(vertices, n_nodes, name, centred=False) -> Shape:
         c = cross(v, w)
     # Polar moment of area of the triangle fan from the (now centroidal) origin.
     polar = np.sum(c * (np.sum(v * v, axis=1) + np.sum(v * w, axis=1) + np.sum(w * w, axis=1))) / 12.0
-    nodes, lengths, normals = _polygon_nodes(v, n)
+    nodes, lengths, normals = _polygon_nodes(v, n, counts)
     edge_len = np.hypot(*(w - v).T)
     return _make_shape(
         name=name,
@@ -636,26 +779,36 @@ def _polygon_shape(vertices, n_nodes, name, centred=False) -> Shape:
 
 
 def _edge_counts(lengths, n) -> np.ndarray:
-    """Split ``n`` sub-intervals over edges in proportion to their lengths.
+    """Split ``n`` sub-intervals over edges: each edge in equal intervals, the
+    split at the largest spacing ``s`` whose ``max(1, ceil(length / s))`` per edge
+    makes at most ``n`` (what `respaced` gives at that spacing, so that a resolved
+    scene's count rebuilds the nodes ``"auto"`` chose), the rest, if ``n`` is not
+    such a total, one each to the edges with the longest intervals.
 
-    Largest-remainder rounding with at least one interval per edge, so that
-    every vertex is a node and the spacing is as even as whole numbers allow.
+    Every vertex is a node, the spacing is as even as whole numbers allow, and
+    equal edges get equal counts whenever ``n`` allows (a regular polygon at a
+    multiple of its vertex count).
     """
-    ideal = n * lengths / lengths.sum()
-    counts = np.maximum(np.floor(ideal).astype(int), 1)
+    lengths = np.asarray(lengths, dtype=float)
+    # the spacings at which some edge's count changes, longest first
+    k = np.arange(1, n + 1)
+    candidates = np.unique((lengths[:, None] / k[None]).ravel())[::-1]
+    counts = np.ones(len(lengths), dtype=int)
+    for spacing in candidates:
+        trial = _intervals(lengths, spacing)
+        if trial.sum() > n:
+            break
+        counts = trial
     while counts.sum() < n:
-        counts[np.argmax(ideal - counts)] += 1
-    # Reached only when the one-per-edge floor overshot: take back from the
-    # edges furthest above their share.
-    while counts.sum() > n:
-        counts[np.argmax(np.where(counts > 1, counts - ideal, -np.inf))] -= 1
+        counts[np.argmax(lengths / counts)] += 1
     return counts
 
 
-def _polygon_nodes(v, n):
+def _polygon_nodes(v, n, counts=None):
     edges = np.roll(v, -1, axis=0) - v
     lengths = np.hypot(edges[:, 0], edges[:, 1])
-    counts = _edge_counts(lengths, n)
+    if counts is None:
+        counts = _edge_counts(lengths, n)
     frac = np.concatenate([np.arange(m) / m for m in counts])
     edge = np.repeat(np.arange(len(v)), counts)
     nodes = v[edge] + frac[:, None] * edges[edge]

@@ -268,9 +268,13 @@ class SpeciesConfig(Config):
                               ge=0)
     restitution: float = keyfield("float", "coefficient of restitution e, dimensionless",
                                  0.5, gt=0, le=1)
-    nodes: int = keyfield("int", "surface nodes (at least the shape's vertices)", 40, ge=3)
+    nodes: int | str = keyfield("int", 'surface nodes (at least the shape\'s vertices); '
+                               '"auto": at most perimeter / 40 apart, and half the thinnest '
+                               "part of the scene's particles, on every edge", AUTO,
+                               auto=True, ge=3)
     ls_spacing: float | str = keyfield("float", 'level-set grid spacing, m; "auto": d_eq '
-                                      "/ 40", AUTO, auto=True, gt=0)
+                                      "/ 40, finer where the thinnest part would span "
+                                      "fewer than 8 cells", AUTO, auto=True, gt=0)
     xi: float | None = keyfield("float", "global damping of this species, 1/s; unset: "
                                "damping.xi (the resolved scene records each species' value)",
                                None, ge=0)

@@ -51,6 +51,7 @@ from .coerce import (
     unknown_key_message,
 )
 from .keys import (
+    AUTO,
     MAX_PACKING_FRACTION,
     MIN_GAP_OVER_DEQ,
     SECTIONS,
@@ -287,7 +288,7 @@ def _check_species(v: dict, index: int, out: Problems) -> tuple[float, int] | No
             out.add(f"{where}.vertices", problem)
             return None
     vertices = shape_vertex_count(shape, v)
-    if good(v["nodes"]) and v["nodes"] < vertices:
+    if good(v["nodes"]) and v["nodes"] != AUTO and v["nodes"] < vertices:
         out.add(f"{where}.nodes", f"must be at least the {vertices} vertices of the "
                                   f"{shape.replace('_', ' ')}, got {v['nodes']}")
     return shape_area(shape, v), vertices
