@@ -1,11 +1,10 @@
 """taichi_hsdem: level-set DEM particles in a Hele-Shaw flow, clogging constrictions.
 
 The method, in the order of the package: scene (:mod:`.scene`) -> shapes and walls
-(:mod:`.shapes`, :mod:`.walls`, :mod:`.placement`) -> resolved set-up
-(:mod:`.resolve`) -> contact (:mod:`.contact`, :mod:`.neighbors`) -> fluid
-(:mod:`.fluid`) -> coupling (:mod:`.coupling`) -> integration (:mod:`.integrate`)
--> the run and its observables (:mod:`.simulation`) -> statistics (:mod:`.stats`)
--> output and rendering (:mod:`.output`, :mod:`.render`).
+(:mod:`.geometry`) -> resolved set-up (:mod:`.resolve`) -> contact, fluid coupling
+and integration in Taichi (:mod:`.dem`) with the pressure solve (:mod:`.fluid`) ->
+the run and its observables (:mod:`.simulation`) -> statistics (:mod:`.stats`) ->
+output and rendering (:mod:`.output`, :mod:`.render`, :mod:`.paraview`).
 
 Examples
 --------

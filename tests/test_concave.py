@@ -14,6 +14,7 @@ import pytest
 from conftest import arena_scene, make_sim
 from taichi_hsdem import SceneError, Simulation, load_scene
 from taichi_hsdem.dem.layout import BAD_PASSED
+from taichi_hsdem.geometry import distance as dist
 from taichi_hsdem.geometry import shapes as sh
 from taichi_hsdem.resolve import node_gap, resolve
 
@@ -87,15 +88,15 @@ def test_inside_point_of_concave_shapes():
     # The L's deepest point is the centre of the largest circle in its corner
     # square: touching both outer faces and the reflex corner, radius
     # r = ARM sqrt(2) / (1 + sqrt(2)) = 0.2636 (r = sqrt(2) (ARM - r)).
-    p, depth = sh.inside_point(L_SHAPE)
+    p, depth = dist.inside_point(L_SHAPE)
     r = ARM * math.sqrt(2) / (1 + math.sqrt(2))
     assert depth == pytest.approx(r, rel=1e-3)
     np.testing.assert_allclose(p + L_CENTROID, [r, r], atol=1e-3)
-    assert sh.signed_distance(L_SHAPE, np.zeros(2)) > 0        # the centroid is outside
+    assert dist.signed_distance(L_SHAPE, np.zeros(2)) > 0        # the centroid is outside
     # symmetric shapes keep their centre exactly
     for s in (sh.square(1.0), sh.regular_polygon(5, 1.0), sh.polygon(star()), sh.circle(1.0)):
-        q, d = sh.inside_point(s)
-        assert q.tolist() == [0.0, 0.0] and d == pytest.approx(-sh.signed_distance(s, q))
+        q, d = dist.inside_point(s)
+        assert q.tolist() == [0.0, 0.0] and d == pytest.approx(-dist.signed_distance(s, q))
     # a crescent (a disk with a bite taken out): the centroid is outside, the point
     # is inside and no sampled point of the outline's inside is deeper
     a = np.linspace(0, 2 * np.pi, 48, endpoint=False)
@@ -105,25 +106,25 @@ def test_inside_point_of_concave_shapes():
     keep_inner = inner[np.hypot(inner[:, 0], inner[:, 1]) < 1.0]
     outline = np.vstack([keep_outer, keep_inner])
     moon = sh.polygon(outline, n_nodes=len(outline))
-    q, d = sh.inside_point(moon)
-    assert sh.signed_distance(moon, np.zeros(2)) > 0 and sh.signed_distance(moon, q) < 0
+    q, d = dist.inside_point(moon)
+    assert dist.signed_distance(moon, np.zeros(2)) > 0 and dist.signed_distance(moon, q) < 0
     grid = np.stack(np.meshgrid(*[np.linspace(-1.5, 1.5, 301)] * 2), -1).reshape(-1, 2)
-    assert -sh.signed_distance(moon, grid).min() <= d + 1e-4 * 2
+    assert -dist.signed_distance(moon, grid).min() <= d + 1e-4 * 2
     # its thinnest part is the band's middle, not its horns, which narrow to nothing
-    assert sh.thinnest_width(moon) == pytest.approx(2 * d)
+    assert dist.thinnest_width(moon) == pytest.approx(2 * d)
 
 
 def test_thinnest_width_is_the_arm():
-    assert sh.thinnest_width(L_SHAPE) == pytest.approx(ARM)
+    assert dist.thinnest_width(L_SHAPE) == pytest.approx(ARM)
     # the star's arm, across its base: from an inner vertex to the far side of the
     # arm, 2 r_in sin(pi/10) cos(angle of the side to the chord)
     v = star()
     side = v[0] - v[-1]
     chord = v[1] - v[-1]
     expected = abs(side[0] * chord[1] - side[1] * chord[0]) / np.linalg.norm(side)
-    assert sh.thinnest_width(sh.polygon(v)) == pytest.approx(expected)
-    assert sh.thinnest_width(sh.rectangle(3.0, 0.2)) == pytest.approx(0.2)
-    assert sh.thinnest_width(sh.circle(2.0)) == 2.0
+    assert dist.thinnest_width(sh.polygon(v)) == pytest.approx(expected)
+    assert dist.thinnest_width(sh.rectangle(3.0, 0.2)) == pytest.approx(0.2)
+    assert dist.thinnest_width(sh.circle(2.0)) == 2.0
 
 
 def test_respaced_regular_polygons_have_equal_faces():
@@ -160,7 +161,7 @@ def test_auto_nodes_and_grid_follow_the_thinnest_part():
     # most an arm apart, and the star a grid of 8 cells across its arm
     thin = dict(star_sp, vertices=star(r_in=0.15).tolist())
     m = resolve(load_scene(arena_scene([dict(L_SPECIES), thin])))
-    w = sh.thinnest_width(sh.polygon(star(r_in=0.15)))
+    w = dist.thinnest_width(sh.polygon(star(r_in=0.15)))
     for s in m.species:
         assert node_gap(s.shape) <= w * (1 + 1e-3)
     assert [len(s.shape.nodes) for s in m.species] == [64, 140]
@@ -215,7 +216,7 @@ def test_nested_ls_rest_in_balance():
     corner = np.array([2.0, 0.0])
     x1 = world(L_CENTROID, corner)
     x2 = world(L_CENTROID, corner + ARM)
-    assert sh.signed_distance(L_SHAPE, sh.to_body(x1, x2, 0.0)) < 0   # the premise
+    assert dist.signed_distance(L_SHAPE, sh.to_body(x1, x2, 0.0)) < 0   # the premise
     g = 20.0 * np.array([-1.0, -1.0]) / math.sqrt(2)
     sim, f, tau, load = settle([dict(L_SPECIES, count=2)], [(*x1, 0.0), (*x2, 0.0)], g)
     assert_at_rest_in_balance(sim, f, tau, load)

@@ -6,6 +6,7 @@ import pytest
 from scipy.spatial.distance import pdist
 
 from taichi_hsdem.geometry import placement as pl
+from taichi_hsdem.geometry import distance as dist
 from taichi_hsdem.geometry import shapes as sh
 from taichi_hsdem.geometry import walls as wl
 
@@ -71,7 +72,7 @@ def test_squares_no_overlap_no_wall_contact(channel):
     # Pairs: the exact test of shapes.py, with the clearance asked for.
     for i in range(n):
         for j in range(i + 1, n):
-            assert not sh.overlaps(square, x[i], theta[i], square, x[j], theta[j], gap)
+            assert not dist.overlaps(square, x[i], theta[i], square, x[j], theta[j], gap)
     # Walls: every node (vertices among them) clears the hand-written walls by
     # more than the gap, and no wall corner lies within gap of a square.
     nodes = sh.transform(square.nodes[None], x[:, None], theta[:, None]).reshape(-1, 2)
@@ -79,7 +80,7 @@ def test_squares_no_overlap_no_wall_contact(channel):
     assert nodes[:, 0].min() >= 0.0
     assert segment_distance(nodes).min() > gap
     for corner in ([20.0, 5.0], [20.0, -5.0]):
-        sd = [sh.signed_distance(square, sh.to_body(np.array([corner]), x[k], theta[k]))[0]
+        sd = [dist.signed_distance(square, sh.to_body(np.array([corner]), x[k], theta[k]))[0]
               for k in range(n)]
         assert min(sd) > gap
 

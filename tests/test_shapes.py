@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from taichi_hsdem.geometry import levelset as ls
+from taichi_hsdem.geometry import distance as dist
 from taichi_hsdem.geometry import shapes as sh
 from taichi_hsdem.geometry.polygon import signed_area
 
@@ -35,7 +36,7 @@ def test_circle_sdf_is_distance_to_centre_minus_radius(rng):
     s = sh.circle(3.0)
     p = rng.uniform(-4, 4, size=(500, 2))
     # Closed form |p| - r; only round-off separates them.
-    np.testing.assert_allclose(sh.signed_distance(s, p), np.hypot(*p.T) - 1.5, atol=1e-12)
+    np.testing.assert_allclose(dist.signed_distance(s, p), np.hypot(*p.T) - 1.5, atol=1e-12)
 
 
 def test_square_sdf_inside_outside_and_at_corners(rng):
@@ -47,10 +48,10 @@ def test_square_sdf_inside_outside_and_at_corners(rng):
         np.array([[-1.0, 1.0]]) + rng.normal(scale=1e-3, size=(200, 2)),
     ])
     # Exact box distance; only round-off separates them.
-    np.testing.assert_allclose(sh.signed_distance(s, p), box_sdf(p, 1.0), atol=1e-12)
+    np.testing.assert_allclose(dist.signed_distance(s, p), box_sdf(p, 1.0), atol=1e-12)
     # Hand values: centre, mid-face outside, diagonal from a corner.
     np.testing.assert_allclose(
-        sh.signed_distance(s, [[0, 0], [0, 1.5], [2, 2], [0.9, 0.9]]),
+        dist.signed_distance(s, [[0, 0], [0, 1.5], [2, 2], [0.9, 0.9]]),
         [-1.0, 0.5, math.sqrt(2.0), -0.1], atol=1e-12)
 
 
@@ -61,12 +62,12 @@ def test_concave_sdf_in_notch_and_arms(rng):
     # box distances; sample the notch [1,2]x[1,2] where both boxes matter.
     notch = rng.uniform(1.0, 2.0, size=(500, 2))
     exact = np.minimum(box_sdf(notch - [1.0, 0.5], [1.0, 0.5]), box_sdf(notch - [0.5, 1.5], [0.5, 0.5]))
-    np.testing.assert_allclose(sh.signed_distance(s, body(notch)), exact, atol=1e-12)
+    np.testing.assert_allclose(dist.signed_distance(s, body(notch)), exact, atol=1e-12)
     # Hand values: mid-arm depth 0.5; the reflex corner (1,1) is the nearest
     # boundary point of (0.9,0.9), at sqrt(0.02); (3,3) is nearest to the corners
     # (2,1) and (1,2) that bound the notch, at sqrt(5).
     np.testing.assert_allclose(
-        sh.signed_distance(s, body([[1.5, 0.5], [0.5, 1.5], [0.9, 0.9], [1.5, 1.5], [3, 3]])),
+        dist.signed_distance(s, body([[1.5, 0.5], [0.5, 1.5], [0.9, 0.9], [1.5, 1.5], [3, 3]])),
         [-0.5, -0.5, -math.sqrt(0.02), 0.5, math.sqrt(5.0)], atol=1e-12)
 
 
@@ -86,7 +87,7 @@ def test_level_set_grid_covers_bounding_box_with_margin():
     np.testing.assert_allclose(g.origin + far, 0.0, atol=1e-12)
     # Node values are the exact distance.
     i, j = 4, 2
-    exact = sh.signed_distance(s, g.origin + h * np.array([i, j]))
+    exact = dist.signed_distance(s, g.origin + h * np.array([i, j]))
     np.testing.assert_allclose(g.phi[i, j], exact, atol=1e-15)
 
 
@@ -197,7 +198,7 @@ def test_polygon_nodes_cover_every_vertex_and_normals_point_out():
     reflex = np.all(np.abs(s.nodes - ([1.0, 1.0] - L_CENTROID)) < 1e-12, axis=1)
     assert reflex.sum() == 1
     expected = np.where(reflex, step / math.sqrt(2), step)
-    np.testing.assert_allclose(sh.signed_distance(s, s.nodes + step * s.node_normals), expected, rtol=1e-9)
+    np.testing.assert_allclose(dist.signed_distance(s, s.nodes + step * s.node_normals), expected, rtol=1e-9)
     # Exactly as many nodes as vertices: the nodes are the vertices.
     only = sh.polygon(L_OUTLINE, n_nodes=6)
     np.testing.assert_array_equal(only.nodes, only.vertices)
@@ -294,11 +295,11 @@ SQ = sh.square(1.0, n_nodes=4)  # nodes only at the corners
 ])
 def test_overlaps_axis_aligned_squares(n_nodes, dx, dy, gap, expected):
     s = sh.square(1.0, n_nodes=n_nodes)
-    assert sh.overlaps(s, [0, 0], 0.0, s, [dx, dy], 0.0, gap=gap) is expected
+    assert dist.overlaps(s, [0, 0], 0.0, s, [dx, dy], 0.0, gap=gap) is expected
     # Turning both by a quarter turn about the origin changes nothing (round-off
     # in the rotation stays inside the touching tolerance).
     q = np.pi / 2
-    assert sh.overlaps(s, [0, 0], q, s, [-dy, dx], q, gap=gap) is expected
+    assert dist.overlaps(s, [0, 0], q, s, [-dy, dx], q, gap=gap) is expected
 
 
 @pytest.mark.parametrize("order", ["ab", "ba"])
@@ -309,7 +310,7 @@ def test_overlaps_corner_into_face(order):
     placed = lambda d: [(SQ, [0.0, 0.0], 0.0), (SQ, [0.5 + corner + d, 0.1], np.pi / 4)]  # noqa: E731
     for d, gap, expected in [(-0.05, 0.0, True), (0.05, 0.0, False), (0.05, 0.04, False), (0.05, 0.06, True)]:
         a, b = placed(d) if order == "ab" else placed(d)[::-1]
-        assert sh.overlaps(*a, *b, gap=gap) is expected, (d, gap)
+        assert dist.overlaps(*a, *b, gap=gap) is expected, (d, gap)
 
 
 def test_overlaps_crossing_bars_with_no_vertex_inside():
@@ -317,21 +318,21 @@ def test_overlaps_crossing_bars_with_no_vertex_inside():
     # no centre of either lies in the other; only the edge crossing shows it.
     a = sh.rectangle(10.0, 1.0, n_nodes=4)
     b = sh.rectangle(1.0, 10.0, n_nodes=4)
-    assert sh.overlaps(a, [0, 0], 0.0, b, [3.0, 4.0], 0.0)
-    assert not sh.overlaps(a, [0, 0], 0.0, b, [3.0, 5.6], 0.0)
+    assert dist.overlaps(a, [0, 0], 0.0, b, [3.0, 4.0], 0.0)
+    assert not dist.overlaps(a, [0, 0], 0.0, b, [3.0, 5.6], 0.0)
 
 
 def test_overlaps_with_circles_is_exact():
     c = sh.circle(1.0)
     # Disks: overlap iff centre distance < r_a + r_b + gap.
-    assert not sh.overlaps(c, [0, 0], 0.0, c, [1.0 + 1e-6, 0], 0.0)
-    assert sh.overlaps(c, [0, 0], 0.0, c, [1.0 - 1e-6, 0], 0.0)
+    assert not dist.overlaps(c, [0, 0], 0.0, c, [1.0 + 1e-6, 0], 0.0)
+    assert dist.overlaps(c, [0, 0], 0.0, c, [1.0 - 1e-6, 0], 0.0)
     # Disk off a square's corner along the diagonal: distance |x - corner| - r.
     e = 0.5 + (0.5 + 1e-6) / math.sqrt(2)
-    assert not sh.overlaps(SQ, [0, 0], 0.0, c, [e, e], 1.0)
-    assert sh.overlaps(c, [e, e], 1.0, SQ, [0, 0], 0.0, gap=2e-6)
+    assert not dist.overlaps(SQ, [0, 0], 0.0, c, [e, e], 1.0)
+    assert dist.overlaps(c, [e, e], 1.0, SQ, [0, 0], 0.0, gap=2e-6)
     e = 0.5 + (0.5 - 1e-6) / math.sqrt(2)
-    assert sh.overlaps(SQ, [0, 0], 0.0, c, [e, e], 1.0)
+    assert dist.overlaps(SQ, [0, 0], 0.0, c, [e, e], 1.0)
 
 
 def test_overlaps_respects_concave_notch():
@@ -340,10 +341,10 @@ def test_overlaps_respects_concave_notch():
     # The notch is [1,2]x[1,2] in the user frame; a 0.8 square at its middle
     # clears both notch faces by 0.1, though it is inside the L's hull.
     at = np.array([1.5, 1.5]) - L_CENTROID
-    assert not sh.overlaps(L, [0, 0], 0.0, small, at, 0.0)
-    assert not sh.overlaps(L, [0, 0], 0.0, small, at, 0.0, gap=0.09)
-    assert sh.overlaps(L, [0, 0], 0.0, small, at, 0.0, gap=0.11)
-    assert sh.overlaps(L, [0, 0], 0.0, small, at - [0.15, 0.0], 0.0)
+    assert not dist.overlaps(L, [0, 0], 0.0, small, at, 0.0)
+    assert not dist.overlaps(L, [0, 0], 0.0, small, at, 0.0, gap=0.09)
+    assert dist.overlaps(L, [0, 0], 0.0, small, at, 0.0, gap=0.11)
+    assert dist.overlaps(L, [0, 0], 0.0, small, at - [0.15, 0.0], 0.0)
 
 
 # ------------------------------------------------------------------------- stack
@@ -404,7 +405,7 @@ def test_stack_needs_spacing_for_polygons():
     (lambda: sh.polygon([[0, 0], [2, 0], [1, 0], [1, 1]]), "polygon edges 0 and 2 cross"),
     (lambda: sh.regular_polygon(6, 1.0, n_nodes=5), "n_nodes=5 is fewer than the polygon's 6 vertices"),
     (lambda: ls.make_level_set(sh.square(1.0), 0.0), "spacing must be a finite number > 0"),
-    (lambda: sh.overlaps(SQ, [0, 0], 0, SQ, [2, 0], 0, gap=-1), "gap must be >= 0"),
+    (lambda: dist.overlaps(SQ, [0, 0], 0, SQ, [2, 0], 0, gap=-1), "gap must be >= 0"),
 ])
 def test_errors_are_clear(make, message):
     with pytest.raises(ValueError, match=message):

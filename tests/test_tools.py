@@ -55,6 +55,7 @@ def test_interval_study_points_are_the_cells_they_are_labelled_with(monkeypatch)
     conv = _load("convergence")
     from taichi_hsdem import load_scene
     from taichi_hsdem import resolve as resolve_module
+    from taichi_hsdem.resolve import domain
     vani = ROOT / "scenes" / "vani_phi026.toml"
 
     def interval(*sets):
@@ -63,7 +64,7 @@ def test_interval_study_points_are_the_cells_they_are_labelled_with(monkeypatch)
 
     steps = [int(round(c / 0.5 * conv.HALF_CELL_STEPS)) for c in conv.INTERVAL_CELLS]
     for cells, k in zip(conv.INTERVAL_CELLS, steps):
-        monkeypatch.setattr(resolve_module, "UPDATE_CELL_FRACTION", cells)
+        monkeypatch.setattr(domain, "UPDATE_CELL_FRACTION", cells)
         assert abs(interval() - k) <= cells / 0.5, (cells, k)
     monkeypatch.undo()
     # the current default is one of the points, and the escapee study's "auto"

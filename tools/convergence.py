@@ -257,7 +257,7 @@ def contact_study(out, quick):
     return rows, csv_path, png
 
 
-# Concave contacts: the "auto" rules of resolve.py at other constants. Node
+# Concave contacts: the "auto" rules of resolve/particles.py at other constants. Node
 # spacing at most perimeter / 40 and at most `fraction` x the scene's thinnest
 # part (auto: resolve.NODE_WIDTH_FRACTION); level-set spacing at most d_eq / 40
 # and at most the thinnest part / `cells` (auto: resolve.LS_THINNEST_CELLS).
@@ -300,7 +300,7 @@ def concave_cases():
 def _press(sim, shapes, name, offset_angle, direction, depth):
     """Put the second body in contact with the first (at (10, 5), unturned) and
     pressed ``depth`` into it along ``direction``; the force on it along the press."""
-    from taichi_hsdem.geometry import shapes as sh
+    from taichi_hsdem.geometry import distance as dist
     a, b = shapes
     xa = np.array([10.0, 5.0])
     offset, theta = offset_angle
@@ -316,7 +316,7 @@ def _press(sim, shapes, name, offset_angle, direction, depth):
     lo, hi = 0.0, 4.0                       # along d from `start`: apart at lo, overlapping at hi
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        if sh.overlaps(a, xa, 0.0, b, start + mid * d, theta):
+        if dist.overlaps(a, xa, 0.0, b, start + mid * d, theta):
             hi = mid
         else:
             lo = mid
@@ -335,7 +335,7 @@ def concave_contact_study(out, quick):
     and most over the offsets), the force across it, and the change from the
     defaults, against the surface nodes and the time of one step."""
     from conftest import arena_scene, make_sim
-    from taichi_hsdem import resolve as rs
+    from taichi_hsdem.resolve import particles as rs
     kn, depth = 1.0e4, 0.02
     fractions = (2.0, 1.0, 0.5, 0.25) if quick else CONCAVE_FRACTIONS
     cells = (4, 8, 16) if quick else CONCAVE_CELLS

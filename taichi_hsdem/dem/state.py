@@ -23,7 +23,7 @@ import numpy as np
 
 from .. import backend
 from ..backend import ti
-from ..geometry import levelset
+from ..geometry import distance, levelset
 from ..geometry import shapes as shp
 from ..resolve import pair_table, wall_table
 from . import layout
@@ -152,7 +152,7 @@ class Templates:
     nx, ny; ``ls_geo[t]``: origin x, origin y, spacing) with its central-difference
     gradient; surface nodes in body frame (``node_meta[t]``: offset, count) with
     their outward boundary vectors ``node_area``; ``inside`` (T, 2) the point
-    deepest inside each template (:func:`~taichi_hsdem.geometry.shapes.inside_point`,
+    deepest inside each template (:func:`~taichi_hsdem.geometry.distance.inside_point`,
     not its centroid, which a concave body may not contain), the one the "passed
     through" check tests; ``is_circle`` and ``radius`` for the templates that are
     exact circles."""
@@ -187,7 +187,7 @@ class Templates:
                                                    for s in sp])),
                    node_meta=array(np.column_stack([stk["node_offset"], stk["node_count"]]),
                                    ti.i32),
-                   inside=array(np.array([shp.inside_point(s.shape)[0] for s in sp])),
+                   inside=array(np.array([distance.inside_point(s.shape)[0] for s in sp])),
                    is_circle=array(stk["is_circle"], ti.i32), radius=array(stk["radius"]),
                    node_count=np.asarray(stk["node_count"]))
 

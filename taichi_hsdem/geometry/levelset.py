@@ -1,5 +1,5 @@
 """Level-set grids of the shape templates: a template's exact signed distance
-(:func:`~taichi_hsdem.geometry.shapes.signed_distance`) sampled on a regular grid
+(:func:`~taichi_hsdem.geometry.distance.signed_distance`) sampled on a regular grid
 in its body frame, read back by bilinear interpolation as the contact kernels do,
 and :func:`stack`, which lays every template out in flat arrays for upload to
 Taichi (one grid and one node list per template, with offsets)."""
@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .shapes import check_positive, concat_arrays, frozen, signed_distance
+from .distance import signed_distance
+from .shapes import check_positive, concat_arrays, frozen
 
 __all__ = ["OUTSIDE_PHI", "LevelSetGrid", "make_level_set", "sample", "stack"]
 

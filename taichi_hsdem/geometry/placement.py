@@ -24,7 +24,7 @@ Particle test. Candidates are found on a uniform grid of cell ``2 R_max + gap``
 (``R`` the bounding radius), so a test costs the same at any particle count.
 Bounding circles farther apart than ``gap`` cannot overlap; inscribed circles
 closer than ``gap`` must; pairs of disks are decided by the first test exactly;
-the rest go to `shapes.overlaps`.
+the rest go to `distance.overlaps`.
 
 Examples
 --------
@@ -41,6 +41,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import distance as _distance
 from . import shapes as _shapes
 from .polygon import segments_intersect
 from .walls import Geometry, fluid_area, wall_distance, wall_segments
@@ -295,9 +296,9 @@ def check_initial(geometry: Geometry, shapes, x, theta, species_of_particle, gap
             elif gap > 0 and -depth < gap:
                 problems.append(f"particles {i} and {j} are {-depth:.2g} m apart, closer than "
                                 f"the gap {gap:.2g} m")
-        elif _shapes.overlaps(si, x[i], theta[i], sj, x[j], theta[j], 0.0):
+        elif _distance.overlaps(si, x[i], theta[i], sj, x[j], theta[j], 0.0):
             problems.append(f"particles {i} and {j} overlap")
-        elif gap > 0 and _shapes.overlaps(si, x[i], theta[i], sj, x[j], theta[j], gap):
+        elif gap > 0 and _distance.overlaps(si, x[i], theta[i], sj, x[j], theta[j], gap):
             problems.append(f"particles {i} and {j} are closer than the gap {gap:.2g} m")
     return problems
 
@@ -343,7 +344,7 @@ class _Packer:
             self._ids[key] = len(self.shapes)
             self.shapes.append(shape)
             # A concave shape's centroid can lie outside it: no inscribed disk then.
-            inner = max(0.0, -float(_shapes.signed_distance(shape, np.zeros(2))))
+            inner = max(0.0, -float(_distance.signed_distance(shape, np.zeros(2))))
             self.radius = np.append(self.radius, shape.bounding_radius)
             self.inner = np.append(self.inner, inner)
         return self._ids[key]
@@ -428,7 +429,7 @@ class _Packer:
         unsure = near & ~sure
         shape = self.shapes[s]
         for c in np.flatnonzero(~sure.any(axis=1)):
-            if not any(_shapes.overlaps(shape, xs[c], th[c], self.shapes[self.sid[q]],
+            if not any(_distance.overlaps(shape, xs[c], th[c], self.shapes[self.sid[q]],
                                         self.pos[q], self.ang[q], self.gap)
                        for q in nb[c, unsure[c]]):
                 return int(c)
@@ -461,7 +462,7 @@ def _wall_clearance(geometry, shape, xs, th, gap, segments, corners, phi_c=None)
     kk, cc = np.nonzero(np.linalg.norm(corners[None] - xs[idx, None], axis=2) <= r + gap)
     corner_clear = np.full(len(idx), np.inf)
     if kk.size:
-        sd = _shapes.signed_distance(shape, _shapes.to_body(corners[cc], xs[idx][kk], th[idx][kk]))
+        sd = _distance.signed_distance(shape, _shapes.to_body(corners[cc], xs[idx][kk], th[idx][kk]))
         np.minimum.at(corner_clear, kk, sd)
     clear[idx] = np.minimum(vertex_clear, corner_clear)
     # Catches a thin wall laid across the shape with no vertex of either inside
