@@ -42,7 +42,6 @@ __all__ = ["resolve", "Model", "Species", "species_shape", "auto_node_spacing", 
            "wall_table", "UPDATE_CELL_FRACTION"]
 
 
-
 def resolve(scene: Scene, arch: str = "x64") -> Model:
     """Resolve every derived and ``auto`` value of ``scene``; refuse what cannot work.
 
