@@ -29,7 +29,8 @@ def circular_inclusion_pressure(x, y, radius, k_out, k_in, gradient=1.0):
     return np.where(r2 < radius**2, inside, outside)[()]
 
 
-def circular_inclusion_error(cells_per_radius, k_ratio, half_width=4.0, tol=1e-11):
+def circular_inclusion_error(cells_per_radius, k_ratio, half_width=4.0, tol=1e-11,
+                             solver_class=None):
     """Discretisation error of the inclusion problem on one grid.
 
     A disk of radius ``a = 1`` and permeability ``k_ratio`` in a unit background,
@@ -43,6 +44,9 @@ def circular_inclusion_error(cells_per_radius, k_ratio, half_width=4.0, tol=1e-1
         ``a / dx``.
     k_ratio : float
         ``k2 / k1``.
+    solver_class : class, optional
+        The solver to use, constructed as :class:`PressureSolver` is (default:
+        :class:`PressureSolver`, pyamg's CG).
 
     Returns
     -------
@@ -69,7 +73,7 @@ def circular_inclusion_error(cells_per_radius, k_ratio, half_width=4.0, tol=1e-1
     bc = {"kind": "dirichlet",
           "left": exact(-edge, centres), "right": exact(edge, centres),
           "bottom": exact(centres, -edge), "top": exact(centres, edge)}
-    solver = PressureSolver(np.ones((m, m), bool), h, h, 1.0, bc, tol=tol)
+    solver = (solver_class or PressureSolver)(np.ones((m, m), bool), h, h, 1.0, bc, tol=tol)
     t_start = time.perf_counter()
     p, _ = solver.solve(kappa)
     seconds = time.perf_counter() - t_start
