@@ -155,6 +155,7 @@ class TaichiPressureSolver:
 
     # Parsing the boundary condition, shaping arrays and the numpy velocity read
     # only the grid attributes this class shares with PressureSolver.
+    _set_grid = FiniteVolumeSystem._set_grid
     _parse_bc = FiniteVolumeSystem._parse_bc
     _as_batch = FiniteVolumeSystem._as_batch
     velocity = FiniteVolumeSystem.velocity
@@ -162,14 +163,7 @@ class TaichiPressureSolver:
     def __init__(self, active, dx, dy, viscosity, bc, n_batch=1, tol=1e-8, gap=None,
                  workers=1, pool_after=None, full_every=None, *, parallel="auto"):
         t_start = time.perf_counter()
-        active = np.array(active, dtype=bool)
-        if active.ndim != 2:
-            raise ValueError(f"active must be a 2D (nx, ny) array, got shape {active.shape}")
-        for name, value in (("dx", dx), ("dy", dy), ("viscosity", viscosity)):
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a finite number > 0, got {value}")
-        if not (isinstance(n_batch, (int, np.integer)) and n_batch >= 1):
-            raise ValueError(f"n_batch must be an int >= 1, got {n_batch}")
+        self._set_grid(active, dx, dy, viscosity, n_batch)
         if not 0 < tol < 1:
             raise ValueError(f"tol must lie in (0, 1), got {tol}")
         if parallel not in ("auto", *_PARALLEL):
@@ -178,13 +172,10 @@ class TaichiPressureSolver:
         if arch not in (ti.x64, ti.arm64, ti.cuda):
             raise BackendError(f"TaichiPressureSolver solves in float64, which Taichi's {arch.name} "
                                "backend lacks; use fluid.PressureSolver there")
-        self.shape = active.shape
-        self.dx, self.dy, self.viscosity = float(dx), float(dy), float(viscosity)
-        self.n_batch, self.tol = int(n_batch), float(tol)
-        self.active = active
+        self.tol = float(tol)
         self._parse_bc(bc, gap)
         self._sides = self._side_table()
-        self.connected, joined = self._anchored(active)
+        self.connected, joined = self._anchored(self.active)
         if self.kind == "flow_rate" and not self.connected[0].any():
             raise ValueError(
                 "no active cell of the inlet column (x = x_min) is connected to the "

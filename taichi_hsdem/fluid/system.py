@@ -38,6 +38,13 @@ class FiniteVolumeSystem:
     """
 
     def __init__(self, active, dx, dy, viscosity, bc, n_batch=1, gap=None):
+        self._set_grid(active, dx, dy, viscosity, n_batch)
+        self._parse_bc(bc, gap)
+        self._build_pattern()
+
+    # ------------------------------------------------------------------ set-up
+    def _set_grid(self, active, dx, dy, viscosity, n_batch):
+        """Check and keep the grid: ``active`` (copied), spacings, viscosity, batch."""
         active = np.array(active, dtype=bool)  # a copy: the caller may reuse theirs
         if active.ndim != 2:
             raise ValueError(f"active must be a 2D (nx, ny) array, got shape {active.shape}")
@@ -50,10 +57,7 @@ class FiniteVolumeSystem:
         self.dx, self.dy, self.viscosity = float(dx), float(dy), float(viscosity)
         self.n_batch = int(n_batch)
         self.active = active
-        self._parse_bc(bc, gap)
-        self._build_pattern()
 
-    # ------------------------------------------------------------------ set-up
     def _parse_bc(self, bc, gap):
         """Turn ``bc`` into one Dirichlet value per box-side face (NaN: wall)."""
         nx, ny = self.shape
