@@ -87,6 +87,8 @@ def save(sim, path) -> Path:
         arrays["fluid.pressure"] = fl.pressure
         arrays["fluid.v_src"] = fl.v_src
         arrays["fluid.w_src"] = fl.w_src
+        if fl.past is not None:
+            arrays["fluid.past"] = fl.past.to_numpy()
         if fl._kappa_solved is not None:
             arrays["fluid.kappa_solved"] = fl._kappa_solved
         arrays.update({f"solver.{k}": v for k, v in fl.solver.state().items()})
@@ -175,6 +177,8 @@ def restore(sim, path) -> dict:
             fl.pressure = data["fluid.pressure"].copy()
             fl.v_src = data["fluid.v_src"].copy()
             fl.w_src = data["fluid.w_src"].copy()
+            if fl.past is not None:
+                fl.past.from_numpy(data["fluid.past"].astype(np.float64))
             fl._kappa_solved = (data["fluid.kappa_solved"].copy()
                                 if "fluid.kappa_solved" in data else None)
             fl.solver.restore({k[len("solver."):]: data[k] for k in data.files

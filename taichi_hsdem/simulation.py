@@ -187,6 +187,7 @@ class Simulation:
         self.history.clear()
         self.rebuild_neighbors()
         if self.fluid is not None:
+            self.fluid.forget_motion()
             self.update_fluid(force=True)
 
     def set_external_load(self, force=None, moment=None):

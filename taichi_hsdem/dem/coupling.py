@@ -25,7 +25,7 @@ import numpy as np
 from .. import backend
 from ..backend import ti  # sets the environment before Taichi loads
 from ..fluid import PressureSolver
-from ..fluid.gmg import TaichiPressureSolver
+from ..fluid.gmg import BodyTerms, TaichiPressureSolver
 from . import state
 from .kmath import cross, node_world, rot, rot_t, spin, template_sample
 from .layout import SAMPLING
@@ -55,14 +55,17 @@ def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
                            ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
                            base: ti.types.ndarray(), kappa: ti.types.ndarray(),
                            vs: ti.types.ndarray(), ws: ti.types.ndarray(),
-                           carried: ti.types.ndarray(), ox: float, oy: float, h: float):
-    """Permeability of every fluid cell, and ``chi v``: the velocity of the particle
-    a cell's centre lies in (``vs + ws x r``), zero outside particles."""
+                           carried: ti.types.ndarray(), owner: ti.types.ndarray(),
+                           ox: float, oy: float, h: float):
+    """Permeability of every fluid cell, ``chi v``: the velocity of the particle
+    a cell's centre lies in (``vs + ws x r``), zero outside particles, and
+    ``owner``: that particle (the highest-numbered where two overlap), -1."""
     nx = base.shape[0]
     ny = base.shape[1]
     for r, cx, cy in kappa:
         kappa[r, cx, cy] = base[cx, cy]
         carried[r, cx, cy] = vec2(0.0, 0.0)
+        owner[r, cx, cy] = -1
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
         if alive[r, i] == 0:
             continue
@@ -80,6 +83,7 @@ def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
                     if inside_body(sp[i], is_circle, trad, ls_phi, ls_grad, ls_meta, ls_geo,
                                    rot_t(c, s, centre - xi)):
                         ti.atomic_min(kappa[r, a, b], kp[sp[i]])
+                        ti.atomic_max(owner[r, a, b], i)
                         carried[r, a, b] = vs[r, i] + spin(ws[r, i], centre - xi)
 
 
@@ -118,6 +122,73 @@ def sample_pressure(pres: ti.template(), active: ti.template(), r, p, ox, oy, h,
         if wsum > 0.0:
             value = acc / wsum
     return value
+
+
+@ti.func
+def _interval_shares(y):
+    """For the damped motion ``v' = F/m - xi v`` at constant F over an interval T,
+    ``y = xi T``: ``(alpha, g)`` with the interval's mean velocity
+    ``alpha v0 + g T F / m``: ``alpha = (1 - exp(-y)) / y``, ``g = (1 - alpha) / y``
+    (1 and 1/2 at y = 0, by the series below y = 0.01)."""
+    g = ti.f64(0.5)
+    if y < 0.01:
+        g = 0.5 + y * (-1.0 / 6.0 + y * (1.0 / 24.0 - y / 120.0))
+    else:
+        g = (y - 1.0 + ti.exp(-y)) / (y * y)
+    return 1.0 - y * g, g
+
+
+@ti.kernel
+def body_drift(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray(),
+               w: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray(),
+               f_ext: ti.types.ndarray(), tau_ext: ti.types.ndarray(),
+               alive: ti.types.ndarray(), running: ti.types.ndarray(),
+               sp: ti.types.ndarray(), mass: ti.types.ndarray(), inertia: ti.types.ndarray(),
+               xi: ti.types.ndarray(), interval: ti.f64, gap: ti.f64, ox: ti.f64, oy: ti.f64,
+               h: ti.f64, past: ti.types.ndarray(), centre: ti.types.ndarray(),
+               mobility: ti.types.ndarray(), drift: ti.types.ndarray()):
+    """fluid.gmg.BodyTerms of every body but ``owner``: its mean velocity over the
+    next fluid interval if the force it felt over the last one were held,
+    ``drift = alpha v0 + g T F / m``, and how that changes with the pressure
+    force, ``mobility = H g T / m`` (``I`` for the rotation); its centre in
+    cell units. ``F``, the mean force of the last interval (held pressure force
+    and contacts), follows from the motion since the last solve (``past``: pose,
+    velocity and whether it was in play then), ``F T = m (dv + xi dx)``; for a
+    body without that history (just placed or re-inserted), the pressure force
+    ``f`` of the last pressure at its present pose and the external load. Then
+    ``past`` is set to now."""
+    for r, i in ti.ndrange(v.shape[0], v.shape[1]):
+        for q in ti.static(range(3)):
+            mobility[r, i, q] = 0.0
+            drift[r, i, q] = 0.0
+        centre[r, i, 0] = (ti.cast(x[r, i].x, ti.f64) - ox) / h - 0.5
+        centre[r, i, 1] = (ti.cast(x[r, i].y, ti.f64) - oy) / h - 0.5
+        now = ti.Vector([ti.cast(x[r, i].x, ti.f64), ti.cast(x[r, i].y, ti.f64),
+                         ti.cast(th[r, i], ti.f64)], dt=ti.f64)
+        vel = ti.Vector([ti.cast(v[r, i].x, ti.f64), ti.cast(v[r, i].y, ti.f64),
+                         ti.cast(w[r, i], ti.f64)], dt=ti.f64)
+        play = running[r] != 0 and alive[r, i] != 0
+        if play:
+            k = ti.cast(xi[sp[i]], ti.f64)
+            alpha, g = _interval_shares(k * interval)
+            inert = ti.Vector([ti.cast(mass[i], ti.f64), ti.cast(mass[i], ti.f64),
+                               ti.cast(inertia[i], ti.f64)], dt=ti.f64)
+            impulse = ti.Vector([0.0, 0.0, 0.0], dt=ti.f64)   # (mean force) T / inertia
+            if past[r, i, 6] != 0:
+                for q in ti.static(range(3)):
+                    impulse[q] = (vel[q] - past[r, i, 3 + q]) + k * (now[q] - past[r, i, q])
+            else:
+                force = ti.Vector([ti.cast(f[r, i].x + f_ext[r, i].x, ti.f64),
+                                   ti.cast(f[r, i].y + f_ext[r, i].y, ti.f64),
+                                   ti.cast(tau[r, i] + tau_ext[r, i], ti.f64)], dt=ti.f64)
+                impulse = force * interval / inert
+            for q in ti.static(range(3)):
+                mobility[r, i, q] = gap * g * interval / inert[q]
+                drift[r, i, q] = alpha * vel[q] + g * impulse[q]
+        for q in ti.static(range(3)):
+            past[r, i, q] = now[q]
+            past[r, i, 3 + q] = vel[q]
+        past[r, i, 6] = 1.0 if play else 0.0
 
 
 @ti.kernel
@@ -192,12 +263,20 @@ class FluidCoupling:
         self.base = state.array(np.where(model.fluid_active, model.kappa_free, 0.0))
         self.kappa = state._zeros(shape)
         self.carried = state._zeros(shape, vector=True)
+        self.owner = state._zeros(shape, ti.i32)
         self.pres = state._zeros(shape)
         # particle velocities the carried flux uses (see _source_velocities)
         self.v_src = np.zeros((n_real, n_part, 2))
         self.w_src = np.zeros((n_real, n_part))
         self.vs = state._zeros((n_real, n_part), vector=True)
         self.ws = state._zeros((n_real, n_part))
+        # the implicit carried volume (fluid.flux_coupling = "implicit"): the
+        # bodies' terms of the pressure solve, made on the first update
+        self.implicit = bool(fl.particle_flux) and fl.flux_coupling == "implicit"
+        self.terms = None
+        # per body at the last solve: x, y, theta, v_x, v_y, omega, in play (1/0)
+        self.past = state._zeros((n_real, n_part, 7), ti.f64) if self.implicit else None
+        self.interval = float(fl.update_interval) * float(model.dt)
         self.grid = (float(g.x_min), float(g.y_min), float(model.fluid_dx))
         self.gap = float(fl.gap)
         self.sampling = SAMPLING[fl.pressure_sampling]
@@ -220,6 +299,31 @@ class FluidCoupling:
         """Body ``i`` of realization ``r`` was re-inserted: it carries no flux yet."""
         self.v_src[r, i] = 0.0
         self.w_src[r, i] = 0.0
+        if self.past is not None:       # no motion since the last solve to read
+            self.past[r, i, 6] = 0.0
+
+    def forget_motion(self):
+        """The bodies were moved by hand (Simulation.set_state): no motion since
+        the last solve to read."""
+        if self.past is not None:
+            self.past.fill(0)
+
+    def _body_terms(self, bodies, batch, particles, templates, materials):
+        """The bodies' terms of the implicit solve (fluid.gmg.BodyTerms) at the
+        present poses and velocities, from their motion since the last solve."""
+        b = bodies
+        # the last pressure's force at the present poses, for bodies without a history
+        self.apply_forces(bodies, batch, particles, templates)
+        R, N = self.v_src.shape[:2]
+        if self.terms is None:
+            self.terms = BodyTerms(self.owner, *(ti.ndarray(ti.f64, (R, N, c)) for c in (2, 3, 3)))
+        k = self.terms
+        body_drift(b.x, b.theta, b.v, b.omega, b.f_fluid, b.tau_fluid, b.f_ext, b.tau_ext,
+                   b.alive,
+                   batch.running, particles.species, particles.mass, particles.inertia,
+                   materials.xi, self.interval, self.gap, *self.grid, self.past, k.centre,
+                   k.mobility, k.drift)
+        return k
 
     def _source_velocities(self, bodies):
         """Velocities of the carried flux: each particle's current velocity averaged
@@ -243,20 +347,23 @@ class FluidCoupling:
         pressure; then refresh every body's held fluid force. Returns the
         :class:`~taichi_hsdem.fluid.SolveInfo` of a solve, or None."""
         m = self.model
-        flux = m.scene.fluid.particle_flux
+        implicit = self.implicit
+        flux = m.scene.fluid.particle_flux and not implicit   # the lagged carried flux
         if flux:
             self._source_velocities(bodies)
         b, t = bodies, templates
         rasterize_permeability(b.x, b.theta, b.alive, particles.species,
                                particles.bounding_radius, materials.kappa, t.is_circle,
                                t.radius, t.ls_phi, t.ls_grad, t.ls_meta, t.ls_geo, self.base,
-                               self.kappa, self.vs, self.ws, self.carried, *self.grid)
+                               self.kappa, self.vs, self.ws, self.carried, self.owner,
+                               *self.grid)
         self.updates += 1
         frac = m.scene.fluid.resolve_fraction
         kappa = None
         if flux or not self.on_device or frac > 0:
             kappa = self.kappa.to_numpy().astype(float)
-        if not force and self._kappa_solved is not None and frac > 0 and not flux:
+        if (not force and self._kappa_solved is not None and frac > 0 and not flux
+                and not implicit):
             changed = (kappa != self._kappa_solved).sum(axis=(1, 2)) / m.fluid_active.sum()
             if changed.max() <= frac:
                 self.apply_forces(bodies, batch, particles, templates)  # same pressure,
@@ -269,8 +376,11 @@ class FluidCoupling:
             # down to 0.1199999973, below the float64 value: compare like with like)
             occupied = (kappa < float(backend.numpy_real()(m.kappa_free))) & m.fluid_active
         if self.on_device:
+            terms = (self._body_terms(bodies, batch, particles, templates, materials)
+                     if implicit else None)
             pres, info = self.solver.solve(self.kappa if kappa is None else kappa,
-                                           carried=carried, occupied=occupied, host=False)
+                                           carried=carried, occupied=occupied, host=False,
+                                           bodies=terms)
             self._pressure_device, self._pressure = pres, None
             finite_or_zero(pres, self.pres)
         else:

@@ -5,9 +5,10 @@ pressure and boundary fluxes read back. Package-internal: :mod:`.gmg` is the API
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 from ..backend import ti
 from ._gmg_cycle import (_ADIR, _ALPHA, _B, _BB, _BETA, _Cells, _Chol, _DIR, _Field, _Grid,
-                         _INLET, _ITERS, _Ints, _NX, _NY, _Ops, _RES, _RHS, _RR, _RUNNING,
-                         _RZ, _Rows, _SOL, _Sides, _TASK, _UNDRIVEN, _X, _apply, _cycle_of,
-                         _diagonal, _index, _lanes, _segment, _segments)
+                         _INLET, _ITERS, _Ints, _NX, _NY, _Ops, _PW, _RES, _RHS, _RR,
+                         _RUNNING, _RZ, _Rows, _SOL, _Sides, _TASK, _UNDRIVEN, _X, _apply,
+                         _cycle_of, _diagonal, _index, _lanes, _segment, _segments)
+from ._gmg_bodies import _Mask3, _Owner, _Real3, _product_of
 
 # ---------------------------------------------------------------- CG pieces
 # Per-cell steps of CG on the finest level (k: flat index, s: column stride),
@@ -33,6 +34,32 @@ def _residual(op: ti.template(), mg: ti.template(), cg: ti.template(), state: ti
 def _matvec(op: ti.template(), mg: ti.template(), cg: ti.template(), state: ti.template(),
             flags: ti.template(), r, k, s):
     cg[_ADIR, k] = _apply(op, cg, _DIR, k, s)
+
+
+# The same two with the moving bodies' term (_gmg_bodies), applied beforehand
+# to the same vector and held in row _PW.
+@ti.func
+def _residual_b(op: ti.template(), mg: ti.template(), cg: ti.template(), state: ti.template(),
+                flags: ti.template(), r, k, s):
+    mg[_B, k] = cg[_RHS, k] - _apply(op, cg, _SOL, k, s) - cg[_PW, k]
+
+
+@ti.func
+def _matvec_b(op: ti.template(), mg: ti.template(), cg: ti.template(), state: ti.template(),
+              flags: ti.template(), r, k, s):
+    cg[_ADIR, k] = _apply(op, cg, _DIR, k, s) + cg[_PW, k]
+
+
+@ti.func
+def _bodies_apply(cg: ti.template(), src, flags: ti.template(), geo: ti.template(),
+                  owner: ti.template(), unknown: ti.template(), centre: ti.template(),
+                  mobility: ti.template(), y: ti.template(), z: ti.template(), dx, dy):
+    """``cg[_PW] = S (H M) S^T cg[src]`` of every running realization, one
+    thread each (a top-level loop: it completes before the next one starts)."""
+    for t in range(flags.shape[0] * _TASK):
+        r = t // _TASK
+        if t % _TASK == 0 and flags[r, _RUNNING]:
+            _product_of(cg, src, _PW, owner, unknown, centre, mobility, y, z, geo, dx, dy, r)
 
 
 @ti.func
@@ -204,7 +231,9 @@ def _after_step(part: ti.template(), state: ti.template(), flags: ti.template(),
 @ti.kernel
 def _residual_check(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows,
                     flags: _Ints, geo: _Ints, tol2: ti.f64, maxiter: ti.i32,
-                    initial: ti.template(), cells: ti.template()) -> ti.i32:
+                    initial: ti.template(), cells: ti.template(), bodies: ti.template(),
+                    owner: _Owner, unknown: _Mask3, centre: _Real3, mobility: _Real3,
+                    y: _Real3, z: _Real3, dx: ti.f64, dy: ti.f64) -> ti.i32:
     """True residual ``r = b - A x`` of every realization and whether it must
     (go on) iterate; returns how many must. ``initial``: at the start of a solve
     (counters reset, |b| computed, the guess cleared where _clear says)."""
@@ -218,7 +247,13 @@ def _residual_check(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows,
         for r in range(R):
             _set_norm_b(part, state, flags, r, n)
         _for_cells(_clear, op, mg, cg, state, flags, geo, cells)
-    _for_cells_and_sum(_residual, op, mg, cg, state, flags, geo, cells, mg, _B, mg, _B, part)
+    if ti.static(bodies):
+        _bodies_apply(cg, _SOL, flags, geo, owner, unknown, centre, mobility, y, z, dx, dy)
+        _for_cells_and_sum(_residual_b, op, mg, cg, state, flags, geo, cells, mg, _B, mg, _B,
+                           part)
+    else:
+        _for_cells_and_sum(_residual, op, mg, cg, state, flags, geo, cells, mg, _B, mg, _B,
+                           part)
     count = 0
     for r in range(R):
         _after_check(part, state, flags, r, n, tol2, maxiter)
@@ -240,12 +275,19 @@ def _cg_direction(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows,
 
 @ti.kernel
 def _cg_step(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags: _Ints,
-             geo: _Ints, tol2: ti.f64, maxiter: ti.i32, cells: ti.template()) -> ti.i32:
+             geo: _Ints, tol2: ti.f64, maxiter: ti.i32, cells: ti.template(),
+             bodies: ti.template(), owner: _Owner, unknown: _Mask3, centre: _Real3,
+             mobility: _Real3, y: _Real3, z: _Real3, dx: ti.f64, dy: ti.f64) -> ti.i32:
     """``x += alpha d``, ``r -= alpha A d`` with ``alpha = r.z / d.Ad``; stop the
     realizations whose residual meets the tolerance; returns how many go on."""
     R, n = flags.shape[0], geo[0, _NX] * _segments(geo[0, _NY])  # segment sums each
-    _for_cells_and_sum(_matvec, op, mg, cg, state, flags, geo, cells, cg, _DIR, cg, _ADIR,
-                       part)
+    if ti.static(bodies):
+        _bodies_apply(cg, _DIR, flags, geo, owner, unknown, centre, mobility, y, z, dx, dy)
+        _for_cells_and_sum(_matvec_b, op, mg, cg, state, flags, geo, cells, cg, _DIR, cg,
+                           _ADIR, part)
+    else:
+        _for_cells_and_sum(_matvec, op, mg, cg, state, flags, geo, cells, cg, _DIR, cg,
+                           _ADIR, part)
     for r in range(R):
         if flags[r, _RUNNING]:
             _set_alpha(part, state, r, n)
@@ -260,20 +302,25 @@ def _cg_step(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags: _
 
 @ti.kernel
 def _solve_each(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags: _Ints,
-                geo: _Ints, chol: _Chol, tol2: ti.f64, maxiter: ti.i32, alpha: ti.f64):
+                geo: _Ints, chol: _Chol, tol2: ti.f64, maxiter: ti.i32, alpha: ti.f64,
+                bodies: ti.template(), owner: _Owner, unknown: _Mask3, centre: _Real3,
+                mobility: _Real3, y: _Real3, z: _Real3, dx: ti.f64, dy: ti.f64):
     """The whole CG solve, one thread per realization: the steps of
     _residual_check, _cg_direction and _cg_step with _cycle_of, in one launch."""
     R, n = flags.shape[0], geo[0, _NX] * _segments(geo[0, _NY])  # segment sums each
     for t in range(R * _TASK):  # one realization per thread (see _TASK)
         if t % _TASK == 0:
             _solve_one(op, mg, cg, part, state, flags, geo, chol, t // _TASK, n, tol2,
-                       maxiter, alpha)
+                       maxiter, alpha, bodies, owner, unknown, centre, mobility, y, z, dx,
+                       dy)
 
 
 @ti.func
 def _solve_one(op: ti.template(), mg: ti.template(), cg: ti.template(), part: ti.template(),
                state: ti.template(), flags: ti.template(), geo: ti.template(),
-               chol: ti.template(), r, n, tol2, maxiter, alpha):
+               chol: ti.template(), r, n, tol2, maxiter, alpha, bodies: ti.template(),
+               owner: ti.template(), unknown: ti.template(), centre: ti.template(),
+               mobility: ti.template(), y: ti.template(), z: ti.template(), dx, dy):
     """The CG solve of realization r, serially (see _solve_each)."""
     flags[r, _ITERS] = 0
     _segment_sums_of(cg, _RHS, cg, _RHS, part, 1, geo, r)
@@ -281,7 +328,11 @@ def _solve_one(op: ti.template(), mg: ti.template(), cg: ti.template(), part: ti
     _for_cells_of(_clear, op, mg, cg, state, flags, geo, r)
     checked = 0
     while not checked:
-        _for_cells_of(_residual, op, mg, cg, state, flags, geo, r)
+        if ti.static(bodies):
+            _product_of(cg, _SOL, _PW, owner, unknown, centre, mobility, y, z, geo, dx, dy, r)
+            _for_cells_of(_residual_b, op, mg, cg, state, flags, geo, r)
+        else:
+            _for_cells_of(_residual, op, mg, cg, state, flags, geo, r)
         _segment_sums_of(mg, _B, mg, _B, part, 0, geo, r)
         _after_check(part, state, flags, r, n, tol2, maxiter)
         checked = 1 - flags[r, _RUNNING]
@@ -292,7 +343,12 @@ def _solve_one(op: ti.template(), mg: ti.template(), cg: ti.template(), part: ti
             _set_beta(part, state, r, n, first)
             _for_cells_of(_direction, op, mg, cg, state, flags, geo, r)
             first = 0
-            _for_cells_of(_matvec, op, mg, cg, state, flags, geo, r)
+            if ti.static(bodies):
+                _product_of(cg, _DIR, _PW, owner, unknown, centre, mobility, y, z, geo, dx,
+                            dy, r)
+                _for_cells_of(_matvec_b, op, mg, cg, state, flags, geo, r)
+            else:
+                _for_cells_of(_matvec, op, mg, cg, state, flags, geo, r)
             _segment_sums_of(cg, _DIR, cg, _ADIR, part, 0, geo, r)
             _set_alpha(part, state, r, n)
             _for_cells_of(_update, op, mg, cg, state, flags, geo, r)

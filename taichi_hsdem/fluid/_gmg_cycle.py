@@ -46,8 +46,9 @@ _TX, _TY = 0, 1
 # the finest level, the preconditioned residual z and the CG residual r).
 _X, _B = 0, 1
 # Rows of the fine-level CG array: solution (p - p_ref), search direction,
-# A times it, right-hand side, and the part of it that depends on kappa only.
-_SOL, _DIR, _ADIR, _RHS, _BASE = range(5)
+# A times it, right-hand side, the part of it that depends on kappa only, and
+# the moving bodies' term of the operator applied to a vector (_gmg_bodies).
+_SOL, _DIR, _ADIR, _RHS, _BASE, _PW = range(6)
 # Columns of the level table.
 _OFF, _NX, _NY = 0, 1, 2
 # Per-realization integers: still iterating, iterations done, no driving at all

@@ -76,6 +76,7 @@ Examples
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 import time
+from typing import NamedTuple
 
 import numpy as np
 from scipy import ndimage
@@ -83,6 +84,7 @@ from scipy import ndimage
 from ..backend import BackendError, ti
 from .solver import FluxImbalanceError, SolveInfo
 from .system import FiniteVolumeSystem
+from ._gmg_bodies import _body_rhs
 from ._gmg_cg import (_boundary_fluxes, _cg_direction, _cg_step, _pressure, _residual_check,
                       _solve_each)
 from ._gmg_cycle import (COARSEST_CELLS, MAXITER, OVERCORRECTION, REALIZATION_CELLS,
@@ -92,6 +94,32 @@ from ._gmg_cycle import (COARSEST_CELLS, MAXITER, OVERCORRECTION, REALIZATION_CE
                          _set_carried_rhs, _smooth, _vec2)
 
 # ---------------------------------------------------------------- the solver
+class BodyTerms(NamedTuple):
+    """The moving bodies of the implicit carried-volume coupling, for
+    :meth:`TaichiPressureSolver.solve` (the equations: :mod:`._gmg_bodies`;
+    docs/scene.md, "Carried volume"): Taichi ndarrays, ``R`` realizations of
+    ``N`` bodies.
+
+    Attributes
+    ----------
+    owner : int32 (R, nx, ny)
+        The body whose outline holds each cell's centre, -1 for none.
+    centre : float64 (R, N, 2)
+        Each body's centre in cell units: cell ``(i, j)``'s centre is at ``(i, j)``.
+    mobility : float64 (R, N, 3)
+        ``H M``: over the next fluid interval the body moves at ``drift -
+        mobility S^T (p - p_0)`` (``v_x, v_y, omega``; 0 for a body out of play),
+        ``p_0`` the initial guess.
+    drift : float64 (R, N, 3)
+        That velocity at ``p = p_0``.
+    """
+
+    owner: object
+    centre: object
+    mobility: object
+    drift: object
+
+
 class TaichiPressureSolver:
     """Pressure solve for ``n_batch`` permeability fields on one grid, in Taichi.
 
@@ -258,7 +286,7 @@ class TaichiPressureSolver:
         self._geo = _upload(geo, ti.i32)
         self._op = ti.ndarray(_vec2, (int(offsets[-1]),))
         self._mg = ti.ndarray(ti.f64, (2, int(offsets[-1])))
-        self._cg = ti.ndarray(ti.f64, (5, fine))
+        self._cg = ti.ndarray(ti.f64, (6, fine))
         segments = (ny + _SEGMENT - 1) // _SEGMENT
         self._part = ti.ndarray(ti.f64, (2, R * nx * segments))  # the segment sums
         self._state = ti.ndarray(ti.f64, (R, 7))
@@ -276,15 +304,23 @@ class TaichiPressureSolver:
         self._fluxes = ti.ndarray(ti.f64, (R, 2))
         self._blocked = np.zeros(R, dtype=bool)
         self._had_zeros = np.zeros(R, dtype=bool)  # zero kappa at the last change
+        # stand-ins for the bodies' arrays in solves without them (never read)
+        self._no_bodies = (_upload(np.full((1, 1, 1), -1), ti.i32),
+                           *(_upload(np.zeros((1, 1, 3)), ti.f64) for _ in range(4)))
+        self._bodies = None                        # those of the solve under way
+        self._body_work = None                     # (y, z): S^T x and H M y per body
 
     # ------------------------------------------------------------------ public
-    def solve(self, kappa, x0=None, carried=None, occupied=None, *, host=True):
+    def solve(self, kappa, x0=None, carried=None, occupied=None, *, host=True, bodies=None):
         """Pressure for each realization's permeability field.
 
         As :meth:`taichi_hsdem.fluid.PressureSolver.solve`, which see; in
         addition the inputs may be Taichi ndarrays (class Notes), and with
         ``host=False`` the pressure is returned as this solver's device ndarray
-        ``(R, nx, ny)`` of float64 (overwritten by the next solve).
+        ``(R, nx, ny)`` of float64 (overwritten by the next solve). With
+        ``bodies`` (:class:`BodyTerms`, not with ``carried``) the moving bodies
+        carry their volume implicitly: the pressure and their velocities over
+        the next interval are solved together (:mod:`._gmg_bodies`).
 
         Returns
         -------
@@ -328,6 +364,10 @@ class TaichiPressureSolver:
         if x0 is not None:
             x0_dev, _ = self._device_grid(x0, "x0", self._staging("x0", (R, *self.shape)))
             _load_guess(x0_dev, self._unknown, self._cg, self._geo, self.p_ref)
+        if bodies is not None and carried is not None:
+            raise ValueError("give carried (the lagged carried flux) or bodies (the "
+                             "implicit one), not both")
+        self._bodies = bodies
         self._set_rhs(carried, occupied)
         self._iterate()
         state = self._state.to_numpy()
@@ -416,6 +456,9 @@ class TaichiPressureSolver:
         _factor(self._op, self._chol, self._geo, len(self.levels) - 1)
 
     def _set_rhs(self, carried, occupied):
+        if self._bodies is not None:
+            self._set_body_rhs(self._bodies)
+            return
         if carried is None:
             _copy_rhs(self._cg, self._geo, self.n_batch)
             return
@@ -435,25 +478,49 @@ class TaichiPressureSolver:
         _set_carried_rhs(self._cg, c_dev, occ_dev, self._connected_dev, self._unknown,
                          self._geo, self.dx, self.dy, given)
 
+    def _set_body_rhs(self, bodies):
+        """The kappa part of the right-hand side plus the bodies' carried flux."""
+        R, (nx, ny) = self.n_batch, self.shape
+        n = bodies.centre.shape[1]
+        for name, shape in (("owner", (R, nx, ny)), ("centre", (R, n, 2)),
+                            ("mobility", (R, n, 3)), ("drift", (R, n, 3))):
+            got = tuple(getattr(bodies, name).shape)
+            if got != shape:
+                raise ValueError(f"bodies.{name} must have shape {shape}, got {got}")
+        if self._body_work is None or tuple(self._body_work[0].shape) != (R, n, 3):
+            self._body_work = (ti.ndarray(ti.f64, (R, n, 3)), ti.ndarray(ti.f64, (R, n, 3)))
+        _body_rhs(self._cg, bodies.owner, self._unknown, bodies.centre, bodies.mobility,
+                  bodies.drift, *self._body_work, self._geo, self.dx, self.dy)
+
+    def _body_args(self):
+        """(whether the bodies' terms apply, their arrays) for the CG kernels."""
+        b = self._bodies
+        if b is None:
+            owner, centre, mobility, y, z = self._no_bodies
+            return (False, owner, self._unknown, centre, mobility, y, z, self.dx, self.dy)
+        return (True, b.owner, self._unknown, b.centre, b.mobility, *self._body_work,
+                self.dx, self.dy)
+
     def _iterate(self):
         """Preconditioned CG of every realization until each meets ``tol`` (or
         MAXITER)."""
         arrays = (self._op, self._mg, self._cg, self._part, self._state, self._flags,
                   self._geo)
         tol2, maxiter = self.tol**2, int(MAXITER)
+        body = self._body_args()
         if self.parallel == "realizations":
-            _solve_each(*arrays, self._chol, tol2, maxiter, OVERCORRECTION)
+            _solve_each(*arrays, self._chol, tol2, maxiter, OVERCORRECTION, *body)
         else:
             cells = self.parallel == "cells"
-            running = _residual_check(*arrays, tol2, maxiter, True, cells)
+            running = _residual_check(*arrays, tol2, maxiter, True, cells, *body)
             first = 1
             while running:
                 self._precondition()
                 _cg_direction(*arrays, first, cells)
                 first = 0
-                running = _cg_step(*arrays, tol2, maxiter, cells)
+                running = _cg_step(*arrays, tol2, maxiter, cells, *body)
                 if not running:  # the true residual decides; restart where it drifted
-                    running = _residual_check(*arrays, tol2, maxiter, False, cells)
+                    running = _residual_check(*arrays, tol2, maxiter, False, cells, *body)
                     first = 1
 
     def _precondition(self):

@@ -224,11 +224,23 @@ def _resolve_solver(model: Model, arch: str, res: _Resolution) -> None:
         res.stop_if_bad()
     if given != "auto":
         model.fluid_solver = given
-        return
-    model.fluid_solver = "gmg" if f64 else "amg"
-    res.note("fluid.solver", model.fluid_solver,
-             "Taichi multigrid CG: every realization at once, on the device" if f64 else
-             f"pyamg on the host: Taichi's {arch} backend has no float64 kernels")
+    else:
+        model.fluid_solver = "gmg" if f64 else "amg"
+        res.note("fluid.solver", model.fluid_solver,
+                 "Taichi multigrid CG: every realization at once, on the device" if f64 else
+                 f"pyamg on the host: Taichi's {arch} backend has no float64 kernels")
+    fl = model.scene.fluid
+    if fl.particle_flux and fl.flux_coupling == "implicit":
+        if model.fluid_solver != "gmg":
+            res.bad("fluid.flux_coupling", '"implicit" solves the particles\' velocities '
+                    'inside the Taichi multigrid CG (fluid.solver = "gmg"), and this run '
+                    f'uses "{model.fluid_solver}"' + ("" if f64 else f" (Taichi's {arch} "
+                    "backend has no float64 kernels)") + '; use flux_coupling = "lagged" '
+                    "or solver = \"gmg\"")
+            res.stop_if_bad()
+        res.note("fluid.flux_coupling", "implicit",
+                 "the pressure and the particles' mean velocities over the next fluid "
+                 "interval are solved together (docs/scene.md, Carried volume)")
 
 
 def open_channel_speed(model: Model) -> float:

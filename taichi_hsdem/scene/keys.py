@@ -162,6 +162,12 @@ class FluidConfig(Config):
     particle_flux: bool = keyfield("bool", "conserve the mixture: moving particles carry "
                                   "their volume (div((kappa/eta) grad p) = div(chi v)); false: "
                                   "fluid alone, particles as fixed obstacles (MODEL.md)", False)
+    flux_coupling: str = keyfield("choice", "how the particles' carried volume enters the "
+                                 'pressure (with particle_flux = true): "implicit": solved '
+                                 "together with their velocities over the next fluid "
+                                 "interval (stable in a clog; fluid.solver gmg); "
+                                 '"lagged": from their velocities at the last solve',
+                                 "implicit", choices=("implicit", "lagged"))
     force_update: str = keyfield("choice", "when the pressure force on the particles is "
                                 "evaluated: at each pressure solve and held in between "
                                 '("solve"), or at every DEM step from the last pressure field '

@@ -1,0 +1,162 @@
+"""The moving bodies' terms of the implicit carried-volume coupling in the Taichi
+pressure solver (:mod:`.gmg`; docs/scene.md, "Carried volume").
+
+A body ``o`` with generalized velocity ``u_o = (v_x, v_y, omega)`` moves the
+fluid-grid cells it owns (``owner``: the cells whose centre lies inside it) at
+``v + omega z x r_c``, ``r_c`` from its centre. Each face carries the mean of
+that velocity over its owned sides, normal to it, times its length (the lagged
+carried flux's rule, fluid.PressureSolver.solve: a face on the body's edge
+carries the whole velocity, so the volume it sweeps lands in the fluid cells
+next to it, not in the body's low permeability). The right-hand side gains
+``S u``, linear in all the bodies' velocities. The velocity over the next
+fluid interval is affine in the pressure: ``u = d + M (F_0 - H S^T (p - p_0))``
+with ``F_0`` the last step's force (held pressure force from ``p_0`` included)
+and ``-H S^T`` the pressure force's change, read by the same weights the other
+way (the pressure gradient summed over the owned cells). So the pressure solves
+
+    (A + S (H M) S^T) x = b + S (q + (H M) S^T x_0),   q = d + M F_0,
+
+``x_0`` the initial guess (the last solution). A body that does not move
+(``q = 0`` and in balance) leaves the pressure of the fixed obstacles
+exactly. The matrix is ``A`` plus one symmetric positive semi-definite term per
+body: CG applies as before, preconditioned by the multigrid of ``A`` alone.
+
+Arrays: ``owner`` (R, nx, ny) int32 (-1: no body), ``centre`` (R, N, 2) float64
+in cell units (cell ``(i, j)``'s centre at ``(i, j)``), ``mobility`` (R, N, 3)
+``H M`` (0 for a body out of play), ``drift`` (R, N, 3) ``q``; work arrays
+``y``, ``z`` (R, N, 3). Each realization's sums run serially in one thread, in
+cell order: its result depends on nothing else in the batch.
+Package-internal: :mod:`.gmg` is the API."""
+# No "from __future__ import annotations": Taichi reads kernel annotations as objects.
+from ..backend import ti
+from ._gmg_cycle import _BASE, _NX, _NY, _RHS, _RUNNING, _SOL, _TASK, _index
+
+_Owner = ti.types.ndarray(dtype=ti.i32, ndim=3)
+_Real3 = ti.types.ndarray(dtype=ti.f64, ndim=3)
+_Flags = ti.types.ndarray(dtype=ti.i32, ndim=2)
+_Mask3 = ti.types.ndarray(dtype=ti.i8, ndim=3)
+_CG = ti.types.ndarray(dtype=ti.f64, ndim=2)
+
+
+@ti.func
+def _chi(owner: ti.template(), r, i, j):
+    return 1.0 if owner[r, i, j] >= 0 else 0.0
+
+
+@ti.func
+def _face_weight(owner: ti.template(), unknown: ti.template(), r, i, j, i2, j2, length):
+    """Length over the owned sides' count (at least 1) of the face between (i, j)
+    and (i2, j2); 0 if (i2, j2) is off the grid or no unknown."""
+    nx, ny = owner.shape[1], owner.shape[2]
+    w = ti.f64(0.0)
+    if 0 <= i2 < nx and 0 <= j2 < ny:
+        if unknown[r, i2, j2] != 0:
+            w = length / ti.max(_chi(owner, r, i, j) + _chi(owner, r, i2, j2), 1.0)
+    return w
+
+
+@ti.func
+def _cell_velocity(owner: ti.template(), centre: ti.template(), z: ti.template(), r, i, j,
+                   dx, dy):
+    """``v + omega z x r_c`` of the body owning (i, j) in the generalized
+    velocities ``z``; 0 in a cell no body owns."""
+    v = ti.Vector([0.0, 0.0], dt=ti.f64)
+    o = owner[r, i, j]
+    if o >= 0:
+        rx = (i - centre[r, o, 0]) * dx
+        ry = (j - centre[r, o, 1]) * dy
+        v = ti.Vector([z[r, o, 0] - z[r, o, 2] * ry, z[r, o, 1] + z[r, o, 2] * rx], dt=ti.f64)
+    return v
+
+
+@ti.func
+def _gather_of(cg: ti.template(), src, owner: ti.template(), unknown: ti.template(),
+               centre: ti.template(), y: ti.template(), geo: ti.template(), dx, dy, r):
+    """``y = S^T cg[src]`` for every body of realization r."""
+    nx, ny = geo[0, _NX], geo[0, _NY]
+    for o in range(y.shape[1]):
+        for m in ti.static(range(3)):
+            y[r, o, m] = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            o = owner[r, i, j]
+            if o >= 0 and unknown[r, i, j] != 0:
+                k = _index(geo, 0, r, i, j)
+                s = ny + 1
+                d = cg[src, k]
+                gx = ti.f64(0.0)
+                gy = ti.f64(0.0)
+                w = _face_weight(owner, unknown, r, i, j, i + 1, j, dy)
+                if w > 0:
+                    gx += (cg[src, k + s] - d) * w
+                w = _face_weight(owner, unknown, r, i, j, i - 1, j, dy)
+                if w > 0:
+                    gx += (d - cg[src, k - s]) * w
+                w = _face_weight(owner, unknown, r, i, j, i, j + 1, dx)
+                if w > 0:
+                    gy += (cg[src, k + 1] - d) * w
+                w = _face_weight(owner, unknown, r, i, j, i, j - 1, dx)
+                if w > 0:
+                    gy += (d - cg[src, k - 1]) * w
+                rx = (i - centre[r, o, 0]) * dx
+                ry = (j - centre[r, o, 1]) * dy
+                y[r, o, 0] += gx
+                y[r, o, 1] += gy
+                y[r, o, 2] += rx * gy - ry * gx
+
+
+@ti.func
+def _spread_of(cg: ti.template(), dst, base, owner: ti.template(), unknown: ti.template(),
+               centre: ti.template(), z: ti.template(), geo: ti.template(), dx, dy, r):
+    """``cg[dst] = cg[base] + S z`` (``base < 0``: ``S z``) at every cell of
+    realization r: the carried flux into each cell, net."""
+    nx, ny = geo[0, _NX], geo[0, _NY]
+    for i in range(nx):
+        for j in range(ny):
+            k = _index(geo, 0, r, i, j)
+            val = ti.f64(0.0)
+            if unknown[r, i, j] != 0:
+                here = _cell_velocity(owner, centre, z, r, i, j, dx, dy)
+                for di, dj, comp, sign in ti.static(((-1, 0, 0, 1.0), (1, 0, 0, -1.0),
+                                                     (0, -1, 1, 1.0), (0, 1, 1, -1.0))):
+                    i2, j2 = i + di, j + dj
+                    length = dy if ti.static(comp == 0) else dx
+                    w = _face_weight(owner, unknown, r, i, j, i2, j2, length)
+                    if w > 0 and (owner[r, i, j] >= 0 or owner[r, i2, j2] >= 0):
+                        there = _cell_velocity(owner, centre, z, r, i2, j2, dx, dy)
+                        val += sign * (here[comp] + there[comp]) * w
+            if base >= 0:
+                val += cg[base, k]
+            cg[dst, k] = val
+
+
+@ti.func
+def _scale_of(mobility: ti.template(), y: ti.template(), z: ti.template(), r):
+    """``z = mobility y`` per body."""
+    for o in range(y.shape[1]):
+        for m in ti.static(range(3)):
+            z[r, o, m] = mobility[r, o, m] * y[r, o, m]
+
+
+@ti.func
+def _product_of(cg: ti.template(), src, dst, owner: ti.template(), unknown: ti.template(),
+                centre: ti.template(), mobility: ti.template(), y: ti.template(),
+                z: ti.template(), geo: ti.template(), dx, dy, r):
+    """``cg[dst] = S (H M) S^T cg[src]`` of realization r, at every cell."""
+    _gather_of(cg, src, owner, unknown, centre, y, geo, dx, dy, r)
+    _scale_of(mobility, y, z, r)
+    _spread_of(cg, dst, -1, owner, unknown, centre, z, geo, dx, dy, r)
+
+
+@ti.kernel
+def _body_rhs(cg: _CG, owner: _Owner, unknown: _Mask3, centre: _Real3, mobility: _Real3,
+              drift: _Real3, y: _Real3, z: _Real3, geo: _Flags, dx: ti.f64, dy: ti.f64):
+    """``RHS = BASE + S (q + (H M) S^T SOL)``, SOL being the initial guess."""
+    for t in range(y.shape[0] * _TASK):
+        r = t // _TASK
+        if t % _TASK == 0:
+            _gather_of(cg, _SOL, owner, unknown, centre, y, geo, dx, dy, r)
+            for o in range(y.shape[1]):
+                for m in ti.static(range(3)):
+                    z[r, o, m] = drift[r, o, m] + mobility[r, o, m] * y[r, o, m]
+            _spread_of(cg, _RHS, _BASE, owner, unknown, centre, z, geo, dx, dy, r)
