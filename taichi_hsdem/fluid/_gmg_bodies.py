@@ -29,7 +29,7 @@ cell order: its result depends on nothing else in the batch.
 Package-internal: :mod:`.gmg` is the API."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 from ..backend import ti
-from ._gmg_cycle import _BASE, _NX, _NY, _RHS, _RUNNING, _SOL, _TASK, _index
+from ._gmg_cycle import _BASE, _NX, _NY, _RHS, _SOL, _TASK, _index
 
 _Owner = ti.types.ndarray(dtype=ti.i32, ndim=3)
 _Real3 = ti.types.ndarray(dtype=ti.f64, ndim=3)
