@@ -11,6 +11,13 @@
   linear pressure field the force is exactly the pressure drop across the node
   polygon's area (divergence theorem) — the property a test checks.
 
+* Carried volume (``fluid.particle_flux = true``): the cells a particle owns
+  move at its velocity. ``"implicit"`` (``fluid.flux_coupling``) hands the solver
+  each particle's mean velocity over the next interval as an affine function of
+  the pressure (:func:`body_drift`, from its motion since the last solve) and
+  the cells' owners; ``"lagged"`` rasterises ``chi v`` from the velocities now
+  (:meth:`FluidCoupling._source_velocities`). docs/scene.md, Carried volume.
+
 :class:`FluidCoupling` owns the fluid arrays of a batch (permeability, carried
 flux, pressure) and the pressure solver (``fluid.solver``: the Taichi multigrid,
 which reads the permeability where the kernels wrote it and leaves the pressure

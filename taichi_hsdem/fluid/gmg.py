@@ -40,6 +40,12 @@ residual ``|b - A p| / |b|`` meets ``tol``; a converged realization is frozen
 residual decides the stop; the true residual is then recomputed, and CG restarted
 from there if rounding had made them differ by more than ``tol``.
 
+*Moving bodies* (``solve(..., bodies=BodyTerms(...))``, the implicit carried
+volume): the operator gains ``S (H M) S^T``, one symmetric positive
+semi-definite term per body (:mod:`._gmg_bodies`). CG applies it to each vector
+it multiplies, in two passes over the grid per realization (gather ``S^T x``
+per body, spread ``S z``), into row ``_PW``; the V-cycle stays that of ``A``.
+
 *Reproducibility.* A realization's pressure does not depend on the others in the
 batch, nor on the thread count: no float atomics; every dot product sums fixed
 segments of ``_SEGMENT`` cells of each grid column, each serially in one thread,

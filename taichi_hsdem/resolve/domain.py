@@ -230,6 +230,12 @@ def _resolve_solver(model: Model, arch: str, res: _Resolution) -> None:
                  "Taichi multigrid CG: every realization at once, on the device" if f64 else
                  f"pyamg on the host: Taichi's {arch} backend has no float64 kernels")
     fl = model.scene.fluid
+    res.notes["fluid.particle_flux"] = (
+        "true: the particles carry their volume, so a stream runs at the fluid's speed "
+        "(docs/scene.md, Carried volume)" if fl.particle_flux else
+        "false: particles as fixed obstacles in each solve (MODEL.md, the paper's model); "
+        "the imposed flow squeezes round them and a stream outruns the fluid "
+        "(tools/stream_rate.py)")
     if fl.particle_flux and fl.flux_coupling == "implicit":
         if model.fluid_solver != "gmg":
             res.bad("fluid.flux_coupling", '"implicit" solves the particles\' velocities '
