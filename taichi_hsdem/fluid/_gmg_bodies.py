@@ -29,13 +29,10 @@ cell order: its result depends on nothing else in the batch.
 Package-internal: :mod:`.gmg` is the API."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 from ..backend import ti
-from ._gmg_cycle import _BASE, _NX, _NY, _RHS, _SOL, _TASK, _index
+from ._gmg_cycle import (_BASE, _NX, _NY, _RHS, _SOL, _TASK, _Cells, _Field, _Ints, _Rows,
+                         _index)
 
-_Owner = ti.types.ndarray(dtype=ti.i32, ndim=3)
-_Real3 = ti.types.ndarray(dtype=ti.f64, ndim=3)
-_Flags = ti.types.ndarray(dtype=ti.i32, ndim=2)
-_Mask3 = ti.types.ndarray(dtype=ti.i8, ndim=3)
-_CG = ti.types.ndarray(dtype=ti.f64, ndim=2)
+_Owner = ti.types.ndarray(dtype=ti.i32, ndim=3)   # (R, nx, ny): a body's number or -1
 
 
 @ti.func
@@ -149,8 +146,8 @@ def _product_of(cg: ti.template(), src, dst, owner: ti.template(), unknown: ti.t
 
 
 @ti.kernel
-def _body_rhs(cg: _CG, owner: _Owner, unknown: _Mask3, centre: _Real3, mobility: _Real3,
-              drift: _Real3, y: _Real3, z: _Real3, geo: _Flags, dx: ti.f64, dy: ti.f64):
+def _body_rhs(cg: _Rows, owner: _Owner, unknown: _Cells, centre: _Field, mobility: _Field,
+              drift: _Field, y: _Field, z: _Field, geo: _Ints, dx: ti.f64, dy: ti.f64):
     """``RHS = BASE + S (q + (H M) S^T SOL)``, SOL being the initial guess."""
     for t in range(y.shape[0] * _TASK):
         r = t // _TASK

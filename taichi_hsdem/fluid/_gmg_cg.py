@@ -8,7 +8,7 @@ from ._gmg_cycle import (_ADIR, _ALPHA, _B, _BB, _BETA, _Cells, _Chol, _DIR, _Fi
                          _INLET, _ITERS, _Ints, _NX, _NY, _Ops, _PW, _RES, _RHS, _RR,
                          _RUNNING, _RZ, _Rows, _SOL, _Sides, _TASK, _UNDRIVEN, _X, _apply,
                          _cycle_of, _diagonal, _index, _lanes, _segment, _segments)
-from ._gmg_bodies import _Mask3, _Owner, _Real3, _product_of
+from ._gmg_bodies import _Owner, _product_of
 
 # ---------------------------------------------------------------- CG pieces
 # Per-cell steps of CG on the finest level (k: flat index, s: column stride),
@@ -232,8 +232,8 @@ def _after_step(part: ti.template(), state: ti.template(), flags: ti.template(),
 def _residual_check(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows,
                     flags: _Ints, geo: _Ints, tol2: ti.f64, maxiter: ti.i32,
                     initial: ti.template(), cells: ti.template(), bodies: ti.template(),
-                    owner: _Owner, unknown: _Mask3, centre: _Real3, mobility: _Real3,
-                    y: _Real3, z: _Real3, dx: ti.f64, dy: ti.f64) -> ti.i32:
+                    owner: _Owner, unknown: _Cells, centre: _Field, mobility: _Field,
+                    y: _Field, z: _Field, dx: ti.f64, dy: ti.f64) -> ti.i32:
     """True residual ``r = b - A x`` of every realization and whether it must
     (go on) iterate; returns how many must. ``initial``: at the start of a solve
     (counters reset, |b| computed, the guess cleared where _clear says)."""
@@ -276,8 +276,8 @@ def _cg_direction(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows,
 @ti.kernel
 def _cg_step(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags: _Ints,
              geo: _Ints, tol2: ti.f64, maxiter: ti.i32, cells: ti.template(),
-             bodies: ti.template(), owner: _Owner, unknown: _Mask3, centre: _Real3,
-             mobility: _Real3, y: _Real3, z: _Real3, dx: ti.f64, dy: ti.f64) -> ti.i32:
+             bodies: ti.template(), owner: _Owner, unknown: _Cells, centre: _Field,
+             mobility: _Field, y: _Field, z: _Field, dx: ti.f64, dy: ti.f64) -> ti.i32:
     """``x += alpha d``, ``r -= alpha A d`` with ``alpha = r.z / d.Ad``; stop the
     realizations whose residual meets the tolerance; returns how many go on."""
     R, n = flags.shape[0], geo[0, _NX] * _segments(geo[0, _NY])  # segment sums each
@@ -303,8 +303,8 @@ def _cg_step(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags: _
 @ti.kernel
 def _solve_each(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags: _Ints,
                 geo: _Ints, chol: _Chol, tol2: ti.f64, maxiter: ti.i32, alpha: ti.f64,
-                bodies: ti.template(), owner: _Owner, unknown: _Mask3, centre: _Real3,
-                mobility: _Real3, y: _Real3, z: _Real3, dx: ti.f64, dy: ti.f64):
+                bodies: ti.template(), owner: _Owner, unknown: _Cells, centre: _Field,
+                mobility: _Field, y: _Field, z: _Field, dx: ti.f64, dy: ti.f64):
     """The whole CG solve, one thread per realization: the steps of
     _residual_check, _cg_direction and _cg_step with _cycle_of, in one launch."""
     R, n = flags.shape[0], geo[0, _NX] * _segments(geo[0, _NY])  # segment sums each
