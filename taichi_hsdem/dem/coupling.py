@@ -366,11 +366,13 @@ class FluidCoupling:
                                *self.grid)
         self.updates += 1
         frac = m.scene.fluid.resolve_fraction
+        # re-solve only when kappa changed enough: never with a carried flux, which
+        # changes at every update
+        skipping = frac > 0 and not m.scene.fluid.particle_flux
         kappa = None
-        if flux or not self.on_device or frac > 0:
+        if flux or not self.on_device or skipping:
             kappa = self.kappa.to_numpy().astype(float)
-        if (not force and self._kappa_solved is not None and frac > 0 and not flux
-                and not implicit):
+        if not force and self._kappa_solved is not None and skipping:
             changed = (kappa != self._kappa_solved).sum(axis=(1, 2)) / m.fluid_active.sum()
             if changed.max() <= frac:
                 self.apply_forces(bodies, batch, particles, templates)  # same pressure,
