@@ -12,6 +12,7 @@ from taichi_hsdem.backend import ti
 from taichi_hsdem.fluid import gmg
 from taichi_hsdem.fluid.gmg import BodyTerms, TaichiPressureSolver
 from taichi_hsdem.fluid.system import FiniteVolumeSystem
+from taichi_hsdem.resolve import resolve
 
 DX, DY, ETA, GAP = 0.5, 0.25, 2.0, 0.5
 FLOW = {"kind": "flow_rate", "Q": 2.0, "p_out": 1.0}
@@ -204,3 +205,28 @@ def test_implicit_needs_the_taichi_solver_and_says_so():
     # the resolved scene says which coupling ran and why
     sim = Simulation(load_scene(jam_scene("implicit", 1.0)))
     assert "solved together" in sim.model.notes["fluid.flux_coupling"]
+
+
+@pytest.mark.parametrize("arch, solver, carried", [("x64", "auto", True), ("cuda", "auto", True),
+                                                   ("vulkan", "auto", False),
+                                                   ("metal", "auto", False),
+                                                   ("x64", "amg", False), ("x64", "gmg", True)])
+def test_particle_flux_auto_carries_the_volume_wherever_gmg_solves(arch, solver, carried):
+    # The default: the carried volume wherever its implicit coupling can run (the
+    # Taichi CG, float64 kernels), fixed obstacles where pyamg solves the pressure
+    # (only the lagged coupling there, unstable once particles jam). The choice and
+    # its reason go into the resolved scene, and the damping's auto rule follows it.
+    scene = jam_scene("implicit", 1.0)
+    del scene["fluid"]["particle_flux"]
+    scene["fluid"]["solver"] = solver
+    model = resolve(load_scene(scene), arch)
+    fl = model.scene.fluid
+    assert fl.particle_flux is carried
+    note = model.notes["fluid.particle_flux"]
+    assert note.startswith(f"{str(carried).lower()}:") and "auto:" in note
+    assert ("keeps a clog stable" in note) == carried
+    # damping.xi = "auto": the carried particle's plate drag eta / (rho (H^2/12 + kp)),
+    # larger by (1 + beta) when it is held in the solve
+    sp = model.species[0]
+    xi_carried = fl.viscosity / (1.0 * (fl.gap ** 2 / 12.0 + sp.kappa))
+    assert (sp.xi == pytest.approx(xi_carried, rel=1e-12)) == carried

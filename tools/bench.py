@@ -24,8 +24,9 @@ Reported per case: DEM steps per second, surface-node (or disk-pair) contact
 evaluations per second over whole steps, simulated realization-seconds per wall
 second, realization pressure solves per second, the solve's share of wall time
 and time per solve, wall time per step with and without the solves, the solver
-used, peak resident memory of the simulation process and of the pressure-solver
-worker processes (``fluid.workers``, pyamg only).
+used and whether the particles carried their volume (``fluid.particle_flux``),
+peak resident memory of the simulation process and of the pressure-solver worker
+processes (``fluid.workers``, pyamg only).
 """
 import argparse
 import json
@@ -195,6 +196,8 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
         "dem_ms_per_step": round(1000 * (wall - (fluid_s1 - fluid_s0)) / steps, 4)
         if steps else None,
         "fluid_solver": sim.model.fluid_solver if sim.fluid is not None else None,
+        # carried volume (implicit coupling) or fixed obstacles: the solve differs
+        "particle_flux": sim.scene.fluid.particle_flux if sim.fluid is not None else None,
         "fluid_workers": workers,
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "worker_peak_rss_mb": worker_rss,

@@ -29,7 +29,8 @@ from ..scene import Scene, SceneError
 from ..scene.keys import AUTO
 from .domain import (_bounding_box, _check_feed, _check_fit, _check_steps, _fluid_grid,
                      _geometry, _initial_poses, _memory_parts, _resolve_intervals,
-                     _resolve_solver, _resolve_stepping, _wall_grid_part, open_channel_speed)
+                     _resolve_solver, _resolve_stepping, _wall_grid_part, open_channel_speed,
+                     resolve_particle_flux)
 from .model import (MIN_FLUID_CELLS_ACROSS_CONSTRICTION, MIN_FLUID_CELLS_PER_DIAMETER,
                     MIN_WALL_CELLS_PER_DIAMETER, NODE_BYTES, SKIN_FRACTION,
                     UPDATE_CELL_FRACTION, Model, Species, _Resolution, _size_keys)
@@ -64,6 +65,7 @@ def resolve(scene: Scene, arch: str = "x64") -> Model:
 
 def _resolve(scene: Scene, arch: str) -> Model:
     res = _Resolution(scene)
+    scene = resolve_particle_flux(scene, arch, res)
     src = scene.source
     budget = limits.available_memory()
     # Shapes: surface nodes are arrays of the node count, before anything is built.

@@ -159,9 +159,12 @@ class FluidConfig(Config):
                                  auto=True, ge=1)
     pressure_sampling: str = keyfield("choice", "how a surface node reads the pressure",
                                      "bilinear", choices=("bilinear", "cell"))
-    particle_flux: bool = keyfield("bool", "conserve the mixture: moving particles carry "
-                                  "their volume (div((kappa/eta) grad p) = div(chi v)); false: "
-                                  "fluid alone, particles as fixed obstacles (MODEL.md)", False)
+    particle_flux: bool | str = keyfield("bool", "conserve the mixture: moving particles "
+                                        "carry their volume (div((kappa/eta) grad p) = "
+                                        "div(chi v)); false: fluid alone, particles as fixed "
+                                        'obstacles (MODEL.md); "auto": true where the pressure '
+                                        'solve is "gmg", which holds the implicit coupling, '
+                                        'else false', AUTO, auto=True)
     flux_coupling: str = keyfield("choice", "how the particles' carried volume enters the "
                                  'pressure (with particle_flux = true): "implicit": solved '
                                  "together with their velocities over the next fluid "
