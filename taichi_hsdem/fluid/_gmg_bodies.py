@@ -24,13 +24,14 @@ body: CG applies as before, preconditioned by the multigrid of ``A`` alone.
 Arrays: ``owner`` (R, nx, ny) int32 (-1: no body), ``centre`` (R, N, 2) float64
 in cell units (cell ``(i, j)``'s centre at ``(i, j)``), ``mobility`` (R, N, 3)
 ``H M`` (0 for a body out of play), ``drift`` (R, N, 3) ``q``; work arrays
-``y``, ``z`` (R, N, 3). Each realization's sums run serially in one thread, in
-cell order: its result depends on nothing else in the batch.
+``y``, ``z`` (R, N, 3), ``box`` (R, N, 4) int32 (each body's box of cells,
+found by :func:`_body_rhs`). Each body's sum runs over the cells it owns in cell
+order, each cell's over its four faces, in one thread each: a realization's
+result depends on nothing else in the batch, nor on how the threads are laid out.
 Package-internal: :mod:`.gmg` is the API."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 from ..backend import ti
-from ._gmg_cycle import (_BASE, _NX, _NY, _RHS, _SOL, _TASK, _Cells, _Field, _Ints, _Rows,
-                         _index)
+from ._gmg_cycle import _BASE, _NX, _NY, _RHS, _SOL, _Cells, _Field, _Ints, _Rows, _index
 
 _Owner = ti.types.ndarray(dtype=ti.i32, ndim=3)   # (R, nx, ny): a body's number or -1
 
@@ -67,17 +68,18 @@ def _cell_velocity(owner: ti.template(), centre: ti.template(), z: ti.template()
 
 
 @ti.func
-def _gather_of(cg: ti.template(), src, owner: ti.template(), unknown: ti.template(),
-               centre: ti.template(), y: ti.template(), geo: ti.template(), dx, dy, r):
-    """``y = S^T cg[src]`` for every body of realization r."""
-    nx, ny = geo[0, _NX], geo[0, _NY]
-    for o in range(y.shape[1]):
-        for m in ti.static(range(3)):
-            y[r, o, m] = 0.0
-    for i in range(nx):
-        for j in range(ny):
-            o = owner[r, i, j]
-            if o >= 0 and unknown[r, i, j] != 0:
+def _gather_body(cg: ti.template(), src, owner: ti.template(), unknown: ti.template(),
+                 centre: ti.template(), y: ti.template(), box: ti.template(), geo: ti.template(),
+                 dx, dy, r, o):
+    """``y[r, o] = (S^T cg[src])`` of body o: its owned cells, in cell order, found
+    in its box of cells (``box``, :func:`_find_boxes`)."""
+    ny = geo[0, _NY]
+    gx_sum = ti.f64(0.0)
+    gy_sum = ti.f64(0.0)
+    tau = ti.f64(0.0)
+    for i in range(box[r, o, 0], box[r, o, 1] + 1):
+        for j in range(box[r, o, 2], box[r, o, 3] + 1):
+            if owner[r, i, j] == o and unknown[r, i, j] != 0:
                 k = _index(geo, 0, r, i, j)
                 s = ny + 1
                 d = cg[src, k]
@@ -97,63 +99,94 @@ def _gather_of(cg: ti.template(), src, owner: ti.template(), unknown: ti.templat
                     gy += (d - cg[src, k - 1]) * w
                 rx = (i - centre[r, o, 0]) * dx
                 ry = (j - centre[r, o, 1]) * dy
-                y[r, o, 0] += gx
-                y[r, o, 1] += gy
-                y[r, o, 2] += rx * gy - ry * gx
+                gx_sum += gx
+                gy_sum += gy
+                tau += rx * gy - ry * gx
+    y[r, o, 0] = gx_sum
+    y[r, o, 1] = gy_sum
+    y[r, o, 2] = tau
 
 
 @ti.func
-def _spread_of(cg: ti.template(), dst, base, owner: ti.template(), unknown: ti.template(),
-               centre: ti.template(), z: ti.template(), geo: ti.template(), dx, dy, r):
-    """``cg[dst] = cg[base] + S z`` (``base < 0``: ``S z``) at every cell of
-    realization r: the carried flux into each cell, net."""
-    nx, ny = geo[0, _NX], geo[0, _NY]
-    for i in range(nx):
-        for j in range(ny):
-            k = _index(geo, 0, r, i, j)
-            val = ti.f64(0.0)
-            if unknown[r, i, j] != 0:
-                here = _cell_velocity(owner, centre, z, r, i, j, dx, dy)
-                for di, dj, comp, sign in ti.static(((-1, 0, 0, 1.0), (1, 0, 0, -1.0),
-                                                     (0, -1, 1, 1.0), (0, 1, 1, -1.0))):
-                    i2, j2 = i + di, j + dj
-                    length = dy if ti.static(comp == 0) else dx
-                    w = _face_weight(owner, unknown, r, i, j, i2, j2, length)
-                    if w > 0 and (owner[r, i, j] >= 0 or owner[r, i2, j2] >= 0):
-                        there = _cell_velocity(owner, centre, z, r, i2, j2, dx, dy)
-                        val += sign * (here[comp] + there[comp]) * w
-            if base >= 0:
-                val += cg[base, k]
-            cg[dst, k] = val
-
-
-@ti.func
-def _scale_of(mobility: ti.template(), y: ti.template(), z: ti.template(), r):
-    """``z = mobility y`` per body."""
-    for o in range(y.shape[1]):
-        for m in ti.static(range(3)):
-            z[r, o, m] = mobility[r, o, m] * y[r, o, m]
+def _spread_cell(cg: ti.template(), base, owner: ti.template(), unknown: ti.template(),
+                 centre: ti.template(), z: ti.template(), geo: ti.template(), dx, dy, r, i, j):
+    """``cg[base] + (S z)`` at cell (i, j) of realization r (``base < 0``:
+    ``S z``): the carried flux into the cell, net."""
+    k = _index(geo, 0, r, i, j)
+    val = ti.f64(0.0)
+    if unknown[r, i, j] != 0:
+        here = _cell_velocity(owner, centre, z, r, i, j, dx, dy)
+        for di, dj, comp, sign in ti.static(((-1, 0, 0, 1.0), (1, 0, 0, -1.0),
+                                             (0, -1, 1, 1.0), (0, 1, 1, -1.0))):
+            i2, j2 = i + di, j + dj
+            length = dy if ti.static(comp == 0) else dx
+            w = _face_weight(owner, unknown, r, i, j, i2, j2, length)
+            if w > 0 and (owner[r, i, j] >= 0 or owner[r, i2, j2] >= 0):
+                there = _cell_velocity(owner, centre, z, r, i2, j2, dx, dy)
+                val += sign * (here[comp] + there[comp]) * w
+    if base >= 0:
+        val += cg[base, k]
+    return val
 
 
 @ti.func
 def _product_of(cg: ti.template(), src, dst, owner: ti.template(), unknown: ti.template(),
                 centre: ti.template(), mobility: ti.template(), y: ti.template(),
-                z: ti.template(), geo: ti.template(), dx, dy, r):
-    """``cg[dst] = S (H M) S^T cg[src]`` of realization r, at every cell."""
-    _gather_of(cg, src, owner, unknown, centre, y, geo, dx, dy, r)
-    _scale_of(mobility, y, z, r)
-    _spread_of(cg, dst, -1, owner, unknown, centre, z, geo, dx, dy, r)
+                z: ti.template(), box: ti.template(), geo: ti.template(), dx, dy, r):
+    """``cg[dst] = S (H M) S^T cg[src]`` of realization r, at every cell, serially
+    (in the thread that runs the realization's whole solve)."""
+    for o in range(y.shape[1]):
+        _gather_body(cg, src, owner, unknown, centre, y, box, geo, dx, dy, r, o)
+        for m in ti.static(range(3)):
+            z[r, o, m] = mobility[r, o, m] * y[r, o, m]
+    for i in range(geo[0, _NX]):
+        for j in range(geo[0, _NY]):
+            cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, owner, unknown, centre,
+                                                            z, geo, dx, dy, r, i, j)
+
+
+@ti.func
+def _product(cg: ti.template(), src, dst, flags: ti.template(), running, owner: ti.template(),
+             unknown: ti.template(), centre: ti.template(), mobility: ti.template(),
+             y: ti.template(), z: ti.template(), box: ti.template(), geo: ti.template(), dx, dy):
+    """``cg[dst] = S (H M) S^T cg[src]`` of every running realization (flag
+    ``running`` of ``flags``), in two top-level loops: a thread per body, then a
+    thread per cell. Each body's sum runs over its own cells in cell order and
+    each cell's over its four faces, so the bits are those of :func:`_product_of`."""
+    R, N = y.shape[0], y.shape[1]
+    for r, o in ti.ndrange(R, N):
+        if flags[r, running]:
+            _gather_body(cg, src, owner, unknown, centre, y, box, geo, dx, dy, r, o)
+            for m in ti.static(range(3)):
+                z[r, o, m] = mobility[r, o, m] * y[r, o, m]
+    for r, i, j in ti.ndrange(R, geo[0, _NX], geo[0, _NY]):
+        if flags[r, running]:
+            cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, owner, unknown, centre,
+                                                            z, geo, dx, dy, r, i, j)
 
 
 @ti.kernel
 def _body_rhs(cg: _Rows, owner: _Owner, unknown: _Cells, centre: _Field, mobility: _Field,
-              drift: _Field, y: _Field, z: _Field, geo: _Ints, dx: ti.f64, dy: ti.f64):
-    """``RHS = BASE + S (q + (H M) S^T SOL)``, SOL being the initial guess."""
-    for t in range(y.shape[0] * _TASK):
-        r = t // _TASK
-        if t % _TASK == 0:
-            _gather_of(cg, _SOL, owner, unknown, centre, y, geo, dx, dy, r)
-            for o in range(y.shape[1]):
-                for m in ti.static(range(3)):
-                    z[r, o, m] = drift[r, o, m] + mobility[r, o, m] * y[r, o, m]
-            _spread_of(cg, _RHS, _BASE, owner, unknown, centre, z, geo, dx, dy, r)
+              drift: _Field, y: _Field, z: _Field, box: _Owner, geo: _Ints, dx: ti.f64,
+              dy: ti.f64):
+    """Each body's box of cells (the smallest holding the cells it owns; empty
+    if none), then ``RHS = BASE + S (q + (H M) S^T SOL)``, SOL being the
+    initial guess."""
+    R, N = y.shape[0], y.shape[1]
+    nx, ny = geo[0, _NX], geo[0, _NY]
+    for r, o in ti.ndrange(R, N):
+        box[r, o, 0], box[r, o, 1], box[r, o, 2], box[r, o, 3] = nx, -1, ny, -1
+    for r, i, j in ti.ndrange(R, nx, ny):
+        o = owner[r, i, j]
+        if o >= 0:
+            ti.atomic_min(box[r, o, 0], i)
+            ti.atomic_max(box[r, o, 1], i)
+            ti.atomic_min(box[r, o, 2], j)
+            ti.atomic_max(box[r, o, 3], j)
+    for r, o in ti.ndrange(R, N):
+        _gather_body(cg, _SOL, owner, unknown, centre, y, box, geo, dx, dy, r, o)
+        for m in ti.static(range(3)):
+            z[r, o, m] = drift[r, o, m] + mobility[r, o, m] * y[r, o, m]
+    for r, i, j in ti.ndrange(R, nx, ny):
+        cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(cg, _BASE, owner, unknown, centre,
+                                                         z, geo, dx, dy, r, i, j)

@@ -312,9 +312,10 @@ class TaichiPressureSolver:
         self._had_zeros = np.zeros(R, dtype=bool)  # zero kappa at the last change
         # stand-ins for the bodies' arrays in solves without them (never read)
         self._no_bodies = (_upload(np.full((1, 1, 1), -1), ti.i32),
-                           *(_upload(np.zeros((1, 1, 3)), ti.f64) for _ in range(4)))
+                           *(_upload(np.zeros((1, 1, 3)), ti.f64) for _ in range(4)),
+                           _upload(np.full((1, 1, 4), -1), ti.i32))
         self._bodies = None                        # those of the solve under way
-        self._body_work = None                     # (y, z): S^T x and H M y per body
+        self._body_work = None   # (y, z, box): S^T x, H M y and the box of cells per body
 
     # ------------------------------------------------------------------ public
     def solve(self, kappa, x0=None, carried=None, occupied=None, *, host=True, bodies=None):
@@ -494,7 +495,8 @@ class TaichiPressureSolver:
             if got != shape:
                 raise ValueError(f"bodies.{name} must have shape {shape}, got {got}")
         if self._body_work is None or tuple(self._body_work[0].shape) != (R, n, 3):
-            self._body_work = (ti.ndarray(ti.f64, (R, n, 3)), ti.ndarray(ti.f64, (R, n, 3)))
+            self._body_work = (ti.ndarray(ti.f64, (R, n, 3)), ti.ndarray(ti.f64, (R, n, 3)),
+                               ti.ndarray(ti.i32, (R, n, 4)))
         _body_rhs(self._cg, bodies.owner, self._unknown, bodies.centre, bodies.mobility,
                   bodies.drift, *self._body_work, self._geo, self.dx, self.dy)
 
@@ -502,8 +504,9 @@ class TaichiPressureSolver:
         """(whether the bodies' terms apply, their arrays) for the CG kernels."""
         b = self._bodies
         if b is None:
-            owner, centre, mobility, y, z = self._no_bodies
-            return (False, owner, self._unknown, centre, mobility, y, z, self.dx, self.dy)
+            owner, centre, mobility, y, z, box = self._no_bodies
+            return (False, owner, self._unknown, centre, mobility, y, z, box, self.dx,
+                    self.dy)
         return (True, b.owner, self._unknown, b.centre, b.mobility, *self._body_work,
                 self.dx, self.dy)
 
