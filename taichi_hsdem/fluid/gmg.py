@@ -43,8 +43,9 @@ from there if rounding had made them differ by more than ``tol``.
 *Moving bodies* (``solve(..., bodies=BodyTerms(...))``, the implicit carried
 volume): the operator gains ``S (H M) S^T``, one symmetric positive
 semi-definite term per body (:mod:`._gmg_bodies`). CG applies it to each vector
-it multiplies, in two passes over the grid per realization (gather ``S^T x``
-per body, spread ``S z``), into row ``_PW``; the V-cycle stays that of ``A``.
+it multiplies, in two passes (gather ``S^T x`` per body over its own box of
+cells, a thread per body; spread ``S z``, a thread per cell), into row ``_PW``;
+the V-cycle stays that of ``A``.
 
 *Reproducibility.* A realization's pressure does not depend on the others in the
 batch, nor on the thread count: no float atomics; every dot product sums fixed
