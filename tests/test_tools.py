@@ -74,6 +74,28 @@ def test_interval_study_points_are_the_cells_they_are_labelled_with(monkeypatch)
     assert interval(f"fluid.update_interval={steps[-1]}") == steps[-1]
 
 
+def test_sweep_studies_take_set_overrides_at_every_point(tmp_path, capsys):
+    # --set reaches every point's resolved scene (e.g. the fixed-obstacle model of
+    # the README's earlier studies); a bad key stops before anything is written
+    conv = _load("convergence")
+    out = tmp_path / "conv"
+    assert conv.main(["interval", "--quick", "--realizations", "1", "--out", str(out),
+                      "--set", "fluid.particle_flux=false"]) == 0
+    resolved = sorted(out.glob("interval-quick/*/scene.resolved.toml"))
+    assert len(resolved) == 4
+    for path in resolved:
+        assert "\nparticle_flux = false\n" in path.read_text()
+    bad = tmp_path / "bad"
+    try:
+        conv.main(["interval", "--quick", "--out", str(bad), "--set", "fluid.bogus=1"])
+    except SystemExit as exc:
+        assert exc.code == 2
+    else:
+        raise AssertionError("a bad --set key was accepted")
+    assert "fluid.bogus: unknown key" in capsys.readouterr().err
+    assert not bad.exists()
+
+
 def test_timestep_study_quick_writes_its_chart(tmp_path):
     conv = _load("convergence")
     rows, csv_path, png = conv.timestep_study(tmp_path, quick=True)

@@ -3,10 +3,10 @@
     python tools/convergence.py pressure [--quick] [--out DIR]
     python tools/convergence.py contact  [--quick] [--out DIR]
     python tools/convergence.py timestep [--quick] [--out DIR]
-    python tools/convergence.py escapees [--quick] [--out DIR] [--realizations N]
-    python tools/convergence.py paper    [--quick] [--out DIR] [--realizations N]
-    python tools/convergence.py interval [--quick] [--out DIR] [--realizations N]
-    python tools/convergence.py solve    [--quick] [--out DIR] [--realizations N]
+    python tools/convergence.py escapees [--quick] [--out DIR] [--realizations N] [--set K=V]
+    python tools/convergence.py paper    [--quick] [--out DIR] [--realizations N] [--set K=V]
+    python tools/convergence.py interval [--quick] [--out DIR] [--realizations N] [--set K=V]
+    python tools/convergence.py solve    [--quick] [--out DIR] [--realizations N] [--set K=V]
 
 ``pressure``: the hourglass scene's pressure field (particles as placed) at
 3 ... 12 fluid cells per smallest diameter against a 16-cell reference, sampled at
@@ -479,17 +479,26 @@ def _knob_value(key, value):
     return round(D_VANI / value, 3) if key == "fluid.cell_size" else value
 
 
+# --set: scene overrides for every point of the sweep studies (main fills it)
+SETS: dict = {}
+
+
 def _sweep(study, points, folder, n, seed, quick):
-    """Run ``points`` of the vani scene (``n`` realizations from ``seed``); every
-    point must give a result."""
+    """Run ``points`` of the vani scene (``n`` realizations from ``seed``, with
+    :data:`SETS`); every point must give a result."""
     from taichi_hsdem.studies.sweep import run_sweep
-    common = {"run.realizations": n, "run.seed": seed}
+    common = {**SETS, "run.realizations": n, "run.seed": seed}
     if quick:
         common["run.t_end"] = 0.3
     # compile (or load) every kernel first, so that no point's wall time holds it
-    from taichi_hsdem import Simulation, load_scene
-    Simulation(load_scene(ROOT / "scenes" / "vani_phi026.toml",
-                          [f"run.realizations={n}", "run.t_end=0.01"])).run()
+    from taichi_hsdem import SceneError, Simulation, load_scene
+    try:
+        Simulation(load_scene(ROOT / "scenes" / "vani_phi026.toml",
+                              [f"run.realizations={n}", "run.t_end=0.01"])
+                   .with_values(SETS)).run()
+    except SceneError as exc:      # a bad --set: the scene's own message, exit 2
+        print(exc, file=sys.stderr)
+        raise SystemExit(2) from None
     rows = run_sweep(ROOT / "scenes" / "vani_phi026.toml", points, folder, common=common,
                      progress=lambda m: print(m, file=sys.stderr))
     bad = [r for r in rows if r["status"] not in ("ran", "skipped", "unstable")]
@@ -764,7 +773,21 @@ def main(argv=None):
                    help="escapees: realizations per point (default 20, --quick 2); "
                         "paper: per setting (default 60); interval: per point "
                         "(default 100); solve: per point (default 20)")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="escapees, paper, interval, solve: override a scene scalar at "
+                        "every point (repeatable), e.g. fluid.particle_flux=false for "
+                        "the fixed-obstacle model; give another --out to keep both")
     a = p.parse_args(argv)
+    from taichi_hsdem.scene.toml import parse_override_value
+    SETS.clear()
+    for item in a.set:
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            p.error(f"--set {item!r}: expected SECTION.KEY=VALUE")
+        SETS[key.strip()] = parse_override_value(value.strip())
+    if a.set and a.study not in ("escapees", "paper", "interval", "solve"):
+        p.error(f"--set applies to the escapees, paper, interval and solve studies, "
+                f"not {a.study}")
     if a.study == "escapees":
         rows, csv_path, png = escapee_study(Path(a.out), a.quick, a.realizations)
     elif a.study == "paper":
