@@ -72,7 +72,7 @@ def _gather_body(cg: ti.template(), src, owner: ti.template(), unknown: ti.templ
                  centre: ti.template(), y: ti.template(), box: ti.template(), geo: ti.template(),
                  dx, dy, r, o):
     """``y[r, o] = (S^T cg[src])`` of body o: its owned cells, in cell order, found
-    in its box of cells (``box``, :func:`_find_boxes`)."""
+    in its box of cells (``box``, made by :func:`_body_rhs`)."""
     ny = geo[0, _NY]
     gx_sum = ti.f64(0.0)
     gy_sum = ti.f64(0.0)

@@ -213,25 +213,42 @@ def _resolve_stepping(model: Model, arch: str, values: dict, notes: dict) -> Non
     notes["run.stepping"] = why
 
 
+def _solver_for(given: str, arch: str) -> str:
+    """The pressure solver ``fluid.solver = given`` runs with on ``arch``: ``auto``
+    is the Taichi multigrid where the backend has float64 kernels, else pyamg."""
+    if given != AUTO:
+        return given
+    return "gmg" if arch not in F32_ONLY_ARCHS else "amg"
+
+
 def resolve_particle_flux(scene: Scene, arch: str, res: _Resolution) -> Scene:
-    """``scene`` with ``fluid.particle_flux = "auto"`` decided, first of all (the
-    damping's ``auto`` rule depends on it): true where the pressure is solved by
-    the Taichi multigrid CG, whose implicit coupling stays stable in a clog; false
-    where it is solved by pyamg (``fluid.solver = "amg"``, or ``"auto"`` on a
-    backend without float64 kernels), where only the lagged coupling exists and
-    it goes unstable once particles jam."""
+    """``scene`` with ``fluid.particle_flux`` decided, first of all (the damping's
+    ``auto`` rule depends on it), and the reason noted. ``auto``: true where the
+    pressure is solved by the Taichi multigrid CG, whose implicit coupling stays
+    stable in a clog; false where it is solved by pyamg (``fluid.solver = "amg"``,
+    or ``"auto"`` on a backend without float64 kernels), where only the lagged
+    coupling exists and it goes unstable once particles jam."""
     fl = scene.fluid
-    if fl.particle_flux != AUTO:
+    auto = fl.particle_flux == AUTO
+    carried = _solver_for(fl.solver, arch) == "gmg" if auto else fl.particle_flux
+    if fl.enabled:
+        res.notes["fluid.particle_flux"] = (
+            "true: the particles carry their volume, so a stream runs at the fluid's speed "
+            "(docs/scene.md, Carried volume)" if carried else
+            "false: particles as fixed obstacles in each solve (MODEL.md, the paper's "
+            "model); the imposed flow squeezes round them and a stream outruns the fluid "
+            "(tools/stream_rate.py)")
+        if auto:
+            res.notes["fluid.particle_flux"] += (
+                " (auto: the Taichi multigrid CG solves the pressure, and its implicit "
+                "coupling keeps a clog stable; the stream's rate is within 10 % of the "
+                "experiments' law, README Fig. 8)" if carried else
+                " (auto: pyamg solves the pressure here, and the carried volume's stable "
+                'coupling, flux_coupling = "implicit", needs solver = "gmg")')
+    if not auto:
         return scene
-    gmg = fl.solver == "gmg" or (fl.solver == AUTO and arch not in F32_ONLY_ARCHS)
-    res.values["fluid.particle_flux"] = gmg
-    res.notes["fluid.particle_flux"] = (
-        " (auto: the Taichi multigrid CG solves the pressure, and its implicit coupling "
-        "keeps a clog stable; the stream's rate is within 10 % of the experiments' law, "
-        "README Fig. 8)" if gmg else
-        " (auto: pyamg solves the pressure here, and the carried volume's stable "
-        'coupling, flux_coupling = "implicit", needs solver = "gmg")')
-    return scene.with_values({"fluid.particle_flux": gmg})
+    res.values["fluid.particle_flux"] = carried
+    return scene.with_values({"fluid.particle_flux": carried})
 
 
 def _resolve_solver(model: Model, arch: str, res: _Resolution) -> None:
@@ -243,20 +260,12 @@ def _resolve_solver(model: Model, arch: str, res: _Resolution) -> None:
         res.bad("fluid.solver", f'"gmg" solves in float64, which Taichi\'s {arch} backend '
                 'lacks; use "amg" (or "auto")')
         res.stop_if_bad()
-    if given != "auto":
-        model.fluid_solver = given
-    else:
-        model.fluid_solver = "gmg" if f64 else "amg"
+    model.fluid_solver = _solver_for(given, arch)
+    if given == AUTO:
         res.note("fluid.solver", model.fluid_solver,
                  "Taichi multigrid CG: every realization at once, on the device" if f64 else
                  f"pyamg on the host: Taichi's {arch} backend has no float64 kernels")
     fl = model.scene.fluid
-    res.notes["fluid.particle_flux"] = (
-        "true: the particles carry their volume, so a stream runs at the fluid's speed "
-        "(docs/scene.md, Carried volume)" if fl.particle_flux else
-        "false: particles as fixed obstacles in each solve (MODEL.md, the paper's model); "
-        "the imposed flow squeezes round them and a stream outruns the fluid "
-        "(tools/stream_rate.py)") + res.notes.get("fluid.particle_flux", "")
     if fl.particle_flux and fl.flux_coupling == "implicit":
         if model.fluid_solver != "gmg":
             res.bad("fluid.flux_coupling", '"implicit" solves the particles\' velocities '
