@@ -310,9 +310,9 @@ def test_frame_zero_is_the_initial_state_and_the_range_is_fixed(tmp_path):
 
 def test_the_video_ends_at_the_first_frame_after_the_realization_stopped(tmp_path):
     """A neck narrower than every particle clogs the hourglass (about t = 14 of
-    20, particles as fixed obstacles): the frames after the stop would repeat the final state, so the video ends
-    with the first frame drawn once the realization stopped, and that frame shows
-    the final state."""
+    20, particles as fixed obstacles): the frames after the stop would repeat the
+    final state, so the video ends with the first frame drawn once the realization
+    stopped, and that frame shows the final state."""
     needs_vulkan()
     from taichi_hsdem import Simulation
     from taichi_hsdem.render import VideoRecorder

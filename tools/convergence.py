@@ -479,26 +479,30 @@ def _knob_value(key, value):
     return round(D_VANI / value, 3) if key == "fluid.cell_size" else value
 
 
-# --set: scene overrides for every point of the sweep studies (main fills it)
-SETS: dict = {}
+# --set: the "section.key=value" overrides of every point of the sweep studies
+# (main fills it)
+SETS: list = []
 
 
 def _sweep(study, points, folder, n, seed, quick):
     """Run ``points`` of the vani scene (``n`` realizations from ``seed``, with
     :data:`SETS`); every point must give a result."""
-    from taichi_hsdem.studies.sweep import run_sweep
-    common = {**SETS, "run.realizations": n, "run.seed": seed}
-    if quick:
-        common["run.t_end"] = 0.3
-    # compile (or load) every kernel first, so that no point's wall time holds it
     from taichi_hsdem import SceneError, Simulation, load_scene
+    from taichi_hsdem.scene.toml import parse_override_value
+    from taichi_hsdem.studies.sweep import run_sweep
+    # compile (or load) every kernel first, so that no point's wall time holds it;
+    # this load checks the --set overrides too
     try:
         Simulation(load_scene(ROOT / "scenes" / "vani_phi026.toml",
-                              [f"run.realizations={n}", "run.t_end=0.01"])
-                   .with_values(SETS)).run()
+                              SETS + [f"run.realizations={n}", "run.t_end=0.01"])).run()
     except SceneError as exc:      # a bad --set: the scene's own message, exit 2
         print(exc, file=sys.stderr)
         raise SystemExit(2) from None
+    common = {k.strip(): parse_override_value(v.strip())
+              for k, _, v in (text.partition("=") for text in SETS)}
+    common.update({"run.realizations": n, "run.seed": seed})
+    if quick:
+        common["run.t_end"] = 0.3
     rows = run_sweep(ROOT / "scenes" / "vani_phi026.toml", points, folder, common=common,
                      progress=lambda m: print(m, file=sys.stderr))
     bad = [r for r in rows if r["status"] not in ("ran", "skipped", "unstable")]
@@ -778,13 +782,7 @@ def main(argv=None):
                         "every point (repeatable), e.g. fluid.particle_flux=false for "
                         "the fixed-obstacle model; give another --out to keep both")
     a = p.parse_args(argv)
-    from taichi_hsdem.scene.toml import parse_override_value
-    SETS.clear()
-    for item in a.set:
-        key, eq, value = item.partition("=")
-        if not eq or not key.strip():
-            p.error(f"--set {item!r}: expected SECTION.KEY=VALUE")
-        SETS[key.strip()] = parse_override_value(value.strip())
+    SETS[:] = a.set
     if a.set and a.study not in ("escapees", "paper", "interval", "solve"):
         p.error(f"--set applies to the escapees, paper, interval and solve studies, "
                 f"not {a.study}")
