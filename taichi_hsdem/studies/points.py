@@ -98,6 +98,9 @@ class PointRun:
     info: dict = field(default_factory=dict)
     error: str | None = None
     resumed: bool = False                           # read back from <out>/points/
+    # seed -> the realization's state where it stopped (a clog's arch, for
+    # tools/arches.py): "x" (n, 2), "theta" (n), "alive" (n), "species" (n)
+    finals: dict = field(default_factory=dict)
 
     @property
     def ok_rows(self):
@@ -249,9 +252,10 @@ def run_point(point: Point, realizations: int, batch: int | None = None, log=Non
             seen.add(key)
             if res.summary["realizations"][r]["status"] == "ok":
                 out.series.append((res.summary["realizations"][r]["seed"], float(t), int(s)))
-        for rr in res.summary["realizations"]:
+        for rr, fs in zip(res.summary["realizations"], res.summary["final_state"]):
             out.rows.append({k: rr.get(k) for k in ("seed", "escapees", "clogged", "t_clog",
                                                     "t_stop", "status", "reason")})
+            out.finals[int(rr["seed"])] = fs
         del sim, res
         done += n
         if log is not None and done < realizations:
@@ -285,7 +289,8 @@ def point_file(out: Path, point: Point) -> Path:
 
 def save_point(path: Path, key: str, run: PointRun) -> None:
     data = {"key": key, "label": run.point.label, "wall_s": run.wall, "info": run.info,
-            "rows": run.rows, "series": [list(x) for x in run.series]}
+            "rows": run.rows, "series": [list(x) for x in run.series],
+            "finals": {str(k): v for k, v in run.finals.items()}}
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, json.dumps(json_safe(data)) + "\n")
 
@@ -305,6 +310,7 @@ def load_point(path: Path, key: str, point: Point) -> PointRun | None:
             return None
         return PointRun(point, rows=list(rows),
                         series=[(int(a), float(b), int(c)) for a, b, c in data["series"]],
-                        wall=float(data["wall_s"]), info=dict(data["info"]), resumed=True)
+                        wall=float(data["wall_s"]), info=dict(data["info"]), resumed=True,
+                        finals={int(k): v for k, v in data.get("finals", {}).items()})
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
