@@ -1,0 +1,437 @@
+"""The arches that clog a figure's points: which particles span the neck, and how they touch.
+
+A clogged realization ends with an arch: a chain of particles, each pressed on the
+next, from one side wall to the other across the constriction. ``tools/figures.py``
+keeps every realization's final state in its point files (``<out>/points/``); this
+module reads them back and, per clogged realization, finds the arch and sorts its
+contacts:
+
+* **the arch** is the shortest chain (fewest particles) of touching particles from
+  the lower side wall to the upper one (ties: the chain nearest the neck);
+* two outlines **touch** when their gap is at most ``tol`` times the bounding
+  diameter ``d_b`` (a pressed contact has a small overlap, a negative gap); the gap
+  is exact for outlines apart (the nearest points of two polygons are a vertex of
+  one and an edge of the other, or a wall corner), and for outlines that overlap it
+  is minus the deepest vertex's depth;
+* a contact is **face-to-face** when an edge of one outline lies along an edge of
+  the other (or along the wall): normals opposed within ``angle`` degrees, the
+  lines within ``tol d_b`` of each other, and a common stretch of at least
+  ``FACE_OVERLAP`` of the shorter edge; otherwise it is a **vertex** contact (a
+  corner on a face or on a corner). A circle's contacts are all ``curved``.
+
+Used as ``python tools/arches.py DIR`` on a finished ``tools/figures.py`` folder:
+``DIR/arches.csv`` (one row per clogged realization), ``DIR/arches.png`` (sample
+arches per point) and one summary line per point.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import heapq
+import json
+import math
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from ..geometry.distance import signed_distance
+from ..geometry.polygon import point_segment_distance
+from ..geometry.shapes import outline_polygon, to_body, transform
+from ..geometry.walls import wall_distance, wall_segments
+
+DEFAULT_TOL = 0.01       # touching: gap <= tol * d_b
+DEFAULT_ANGLE = 10.0     # face-to-face: normals opposed within this many degrees
+FACE_OVERLAP = 0.25      # ... over at least this fraction of the shorter edge
+
+
+class ArchError(Exception):
+    """A folder or scene the arch analysis cannot read, in the user's terms."""
+
+
+# ----------------------------------------------------------------------------
+# Geometry of one configuration
+# ----------------------------------------------------------------------------
+
+def world_outline(shape, x, theta):
+    """A polygon's vertices in the world (counter-clockwise); None for a circle."""
+    if shape.kind == "circle":
+        return None
+    return transform(shape.vertices, x, theta)
+
+
+def _convex(v) -> bool:
+    e = np.roll(v, -1, axis=0) - v
+    return bool(np.all(e[:, 0] * np.roll(e, -1, axis=0)[:, 1]
+                       - e[:, 1] * np.roll(e, -1, axis=0)[:, 0] >= 0))
+
+
+def _separation(va, vb) -> float:
+    """Largest separation of two convex CCW polygons along their edge normals:
+    minus the penetration depth when they overlap (the separating-axis test)."""
+    best = -math.inf
+    for v, w in ((va, vb), (vb, va)):
+        _, _, _, n, _ = _edges(v)
+        # along each edge's outward normal: how far the other's nearest vertex lies past it
+        past = np.einsum("ijk,ik->ij", w[None, :, :] - v[:, None, :], n).min(axis=1)
+        best = max(best, float(past.max()))
+    return best
+
+
+def pair_gap(shape_a, xa, ta, shape_b, xb, tb) -> float:
+    """Gap between two outlines: their distance when apart; when they overlap,
+    minus the penetration depth for two convex polygons (the separating-axis
+    test), else minus the deepest vertex's depth (for circles, the overlap)."""
+    xa, xb = np.asarray(xa, float), np.asarray(xb, float)
+    if shape_a.kind == "circle" and shape_b.kind == "circle":
+        return float(np.hypot(*(xa - xb)) - shape_a.radius - shape_b.radius)
+    if shape_a.kind == "circle":
+        shape_a, xa, ta, shape_b, xb, tb = shape_b, xb, tb, shape_a, xa, ta
+    if shape_b.kind == "circle":
+        return float(signed_distance(shape_a, to_body(xb[None], xa, ta))[0] - shape_b.radius)
+    va = world_outline(shape_a, xa, ta)
+    vb = world_outline(shape_b, xb, tb)
+    vertex = float(min(signed_distance(shape_b, to_body(va, xb, tb)).min(),
+                       signed_distance(shape_a, to_body(vb, xa, ta)).min()))
+    if vertex > 0 or not (_convex(shape_a.vertices) and _convex(shape_b.vertices)):
+        return vertex
+    return min(vertex, _separation(va, vb))
+
+
+class Sides:
+    """The two side walls of a channel along x: lower (y below the centre line)
+    and upper, as segments with their normals into the fluid."""
+
+    def __init__(self, geometry):
+        if geometry.obstacles:
+            raise ArchError("the arch analysis needs a channel with two side walls and "
+                            "no obstacles")
+        segs = wall_segments(geometry)
+        yc = 0.5 * (geometry.y_min + geometry.y_max)
+        mid = segs.mean(axis=1)
+        self.geometry = geometry
+        self.segments = [segs[mid[:, 1] < yc], segs[mid[:, 1] >= yc]]
+        self.normals = []
+        for s in self.segments:
+            t = s[:, 1] - s[:, 0]
+            n = np.stack([-t[:, 1], t[:, 0]], axis=1) / np.hypot(t[:, 0], t[:, 1])[:, None]
+            # into the fluid: checked a little way off each segment's middle
+            probe = s.mean(axis=1) + 1e-6 * np.hypot(t[:, 0], t[:, 1])[:, None] * n
+            n *= np.where(wall_distance(geometry, probe) > 0, 1.0, -1.0)[:, None]
+            self.normals.append(n)
+
+    def _point_gap(self, pts, k):
+        """Signed distance of points to side ``k`` (negative inside that wall)."""
+        pts = np.asarray(pts, float).reshape(-1, 2)
+        d = [point_segment_distance(pts[:, None, :], s[None, :, 0], s[None, :, 1]).min(axis=1)
+             for s in self.segments]
+        inside = wall_distance(self.geometry, pts) < 0
+        return np.where(inside & (d[k] <= d[1 - k]), -d[k], d[k])
+
+    def gap(self, shape, x, theta, k) -> float:
+        """Gap between a particle and side wall ``k`` (0 lower, 1 upper)."""
+        x = np.asarray(x, float)
+        if shape.kind == "circle":
+            return float(self._point_gap(x, k)[0] - shape.radius)
+        v = world_outline(shape, x, theta)
+        corners = self.segments[k].reshape(-1, 2)
+        return float(min(self._point_gap(v, k).min(),
+                         signed_distance(shape, to_body(corners, x, theta)).min()))
+
+
+def _edges(v):
+    """(start, end, unit tangent, outward normal, length) of a CCW polygon's edges."""
+    a, b = v, np.roll(v, -1, axis=0)
+    t = b - a
+    length = np.hypot(t[:, 0], t[:, 1])
+    t = t / length[:, None]
+    return a, b, t, np.stack([t[:, 1], -t[:, 0]], axis=1), length
+
+
+def _faces_touch(a, b, n_a, n_b, tol, angle) -> bool:
+    """Do edge sets ``a`` (starts, ends, normals) and ``b`` hold an opposed pair
+    lying along each other (see the module notes)?"""
+    (a0, a1, len_a), (b0, b1, len_b) = a, b
+    cos = math.cos(math.radians(angle))
+    for i in range(len(a0)):
+        t = (a1[i] - a0[i]) / len_a[i]
+        for j in range(len(b0)):
+            if float(n_a[i] @ n_b[j]) > -cos:
+                continue
+            # the other edge's ends, along and across this edge's line
+            ends = np.stack([b0[j], b1[j]]) - a0[i]
+            across = np.abs(ends @ n_a[i])
+            if across.max() > tol:
+                continue
+            s = np.sort(ends @ t)
+            common = min(s[1], len_a[i]) - max(s[0], 0.0)
+            if common >= FACE_OVERLAP * min(len_a[i], len_b[j]):
+                return True
+    return False
+
+
+def pair_kind(shape_a, xa, ta, shape_b, xb, tb, tol, angle=DEFAULT_ANGLE) -> str:
+    """``"face"``, ``"vertex"`` or (a circle in it) ``"curved"`` for a touching pair."""
+    if shape_a.kind == "circle" or shape_b.kind == "circle":
+        return "curved"
+    a0, a1, _, na, la = _edges(world_outline(shape_a, xa, ta))
+    b0, b1, _, nb, lb = _edges(world_outline(shape_b, xb, tb))
+    return "face" if _faces_touch((a0, a1, la), (b0, b1, lb), na, nb, tol, angle) else "vertex"
+
+
+def wall_kind(sides, k, shape, x, theta, tol, angle=DEFAULT_ANGLE) -> str:
+    """The same for a particle on side wall ``k``: a face flat on the wall or not."""
+    if shape.kind == "circle":
+        return "curved"
+    a0, a1, _, na, la = _edges(world_outline(shape, x, theta))
+    s = sides.segments[k]
+    ls = np.hypot(*(s[:, 1] - s[:, 0]).T)
+    # the wall, seen as a body, faces the fluid: its normal opposes the particle's face
+    return ("face" if _faces_touch((a0, a1, la), (s[:, 0], s[:, 1], ls), na,
+                                   sides.normals[k], tol, angle) else "vertex")
+
+
+# ----------------------------------------------------------------------------
+# The arch of one final state
+# ----------------------------------------------------------------------------
+
+def find_arch(shapes, x, theta, alive, species, sides, neck_x, d_b, tol=DEFAULT_TOL,
+              angle=DEFAULT_ANGLE):
+    """The arch of one configuration, or None when no chain of touching particles
+    joins the two side walls.
+
+    Returns ``{"particles": [i, ...] from the lower wall up, "pairs": [kind, ...],
+    "walls": [kind_lower, kind_upper], "gaps": [...]}``.
+    """
+    x = np.asarray(x, float)
+    theta = np.asarray(theta, float)
+    live = [i for i in range(len(x)) if alive[i]]
+    if not live:
+        return None
+    gap_d = tol * d_b
+    reach = 2.0 * d_b          # two centres further apart than two bounding diameters cannot touch
+    sh = {i: shapes[int(species[i])] for i in live}
+    on_wall = {k: [i for i in live if sides.gap(sh[i], x[i], theta[i], k) <= gap_d] for k in (0, 1)}
+    if not on_wall[0] or not on_wall[1]:
+        return None
+    # Dijkstra over particles: one per particle, a little for distance from the neck
+    weight = {i: 1.0 + 1e-3 * abs(x[i, 0] - neck_x) / d_b for i in live}
+    neigh = {}
+
+    def neighbours(i):
+        if i not in neigh:
+            near = [j for j in live if j != i and np.hypot(*(x[j] - x[i])) < reach]
+            neigh[i] = [j for j in near
+                        if pair_gap(sh[i], x[i], theta[i], sh[j], x[j], theta[j]) <= gap_d]
+        return neigh[i]
+
+    dist = {i: weight[i] for i in on_wall[0]}
+    prev = {i: None for i in on_wall[0]}
+    heap = [(d, i) for i, d in dist.items()]
+    heapq.heapify(heap)
+    top = set(on_wall[1])
+    end = None
+    while heap:
+        d, i = heapq.heappop(heap)
+        if d > dist[i]:
+            continue
+        if i in top:
+            end = i
+            break
+        for j in neighbours(i):
+            nd = d + weight[j]
+            if nd < dist.get(j, math.inf):
+                dist[j], prev[j] = nd, i
+                heapq.heappush(heap, (nd, j))
+    if end is None:
+        return None
+    chain = [end]
+    while prev[chain[-1]] is not None:
+        chain.append(prev[chain[-1]])
+    chain.reverse()
+    pairs = [pair_kind(sh[i], x[i], theta[i], sh[j], x[j], theta[j], gap_d, angle)
+             for i, j in zip(chain, chain[1:])]
+    walls = [wall_kind(sides, 0, sh[chain[0]], x[chain[0]], theta[chain[0]], gap_d, angle),
+             wall_kind(sides, 1, sh[chain[-1]], x[chain[-1]], theta[chain[-1]], gap_d, angle)]
+    return {"particles": chain, "pairs": pairs, "walls": walls}
+
+
+# ----------------------------------------------------------------------------
+# A figure folder
+# ----------------------------------------------------------------------------
+
+def _point_models(folder: Path):
+    """``[(label, model, point data)]`` of a finished figure folder."""
+    from ..resolve import resolve
+    from ..scene import SceneError, load_scene
+
+    try:
+        fig = json.loads((folder / "figure.json").read_text())
+    except (OSError, ValueError) as exc:
+        raise ArchError(f"{folder}: no readable figure.json ({exc}); run tools/figures.py "
+                        f"into it first") from None
+    from .points import Point, point_file
+    try:
+        base = load_scene(fig["scene"], list(fig.get("base_overrides") or []))
+    except SceneError as exc:
+        raise ArchError("; ".join(exc.problems)) from None
+    out = []
+    for p in fig["points"]:
+        scene = base.with_values(dict(p["overrides"]))
+        path = point_file(folder, Point(p["label"], p["values"], scene))
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            raise ArchError(f"{path}: missing or unreadable; rerun the figure") from None
+        if not data.get("finals"):
+            raise ArchError(f"{path}: no final states (point files written before they were "
+                            f"kept); rerun the figure with --no-resume")
+        out.append((p["label"], resolve(scene.with_values({"run.realizations": 1})), data))
+    return out
+
+
+def analyse_folder(folder, tol=DEFAULT_TOL, angle=DEFAULT_ANGLE):
+    """Per point ``(label, rows, model, data)``; a row per clogged stable realization."""
+    folder = Path(folder)
+    result = []
+    for label, model, data in _point_models(folder):
+        shapes = [s.shape for s in model.species]
+        d_b = 2.0 * max(s.bounding_radius for s in shapes)
+        g = model.geometry
+        sides = Sides(g)
+        neck_x = 0.5 * (g.constriction_x0 + g.constriction_x1)
+        rows = []
+        for r in data["rows"]:
+            if r["status"] != "ok" or not r["clogged"]:
+                continue
+            fs = data["finals"].get(str(r["seed"]))
+            if fs is None:
+                continue
+            arch = find_arch(shapes, fs["x"], fs["theta"], fs["alive"], fs["species"], sides,
+                             neck_x, d_b, tol, angle)
+            row = {"label": label, "seed": r["seed"], "escapees": r["escapees"],
+                   "arch_found": arch is not None}
+            if arch is not None:
+                kinds = Counter(arch["pairs"])
+                walls = Counter(arch["walls"])
+                row.update({"arch_size": len(arch["particles"]),
+                            "pair_face": kinds["face"], "pair_vertex": kinds["vertex"],
+                            "pair_curved": kinds["curved"],
+                            "wall_face": walls["face"], "wall_vertex": walls["vertex"],
+                            "wall_curved": walls["curved"],
+                            "particles": " ".join(map(str, arch["particles"]))})
+            rows.append(row)
+        result.append((label, rows, model, data))
+    return result
+
+
+COLUMNS = ["label", "seed", "escapees", "arch_found", "arch_size", "pair_face", "pair_vertex",
+           "pair_curved", "wall_face", "wall_vertex", "wall_curved", "particles"]
+
+
+def summary_line(label, rows) -> str:
+    found = [r for r in rows if r["arch_found"]]
+    sizes = Counter(r["arch_size"] for r in found)
+    pf = sum(r["pair_face"] for r in found)
+    pv = sum(r["pair_vertex"] for r in found)
+    wf = sum(r["wall_face"] for r in found)
+    wv = sum(r["wall_vertex"] for r in found)
+    mean = np.mean([r["arch_size"] for r in found]) if found else math.nan
+    parts = [f"{label}: {len(rows)} clogged, arch found in {len(found)}",
+             "sizes " + ", ".join(f"{k}: {sizes[k]}" for k in sorted(sizes)) + f" (mean {mean:.2f})"]
+    if pf + pv:
+        parts.append(f"particle-particle contacts face {pf}, vertex {pv} "
+                     f"({pf / (pf + pv):.0%} face)")
+    if wf + wv:
+        parts.append(f"on the walls face {wf}, vertex {wv}")
+    return "; ".join(parts)
+
+
+def draw(result, path, examples=6, tol=DEFAULT_TOL):
+    """Sample arches per point, zoomed on the neck: one row of panels per point."""
+    from .plots import pyplot
+    plt = pyplot()
+    n_rows = len(result)
+    fig, axes = plt.subplots(n_rows, examples, figsize=(2.0 * examples, 2.1 * n_rows),
+                             squeeze=False)
+    for row_axes, (label, rows, model, data) in zip(axes, result):
+        shapes = [s.shape for s in model.species]
+        d_b = 2.0 * max(s.bounding_radius for s in shapes)
+        g = model.geometry
+        neck_x = 0.5 * (g.constriction_x0 + g.constriction_x1)
+        yc = 0.5 * (g.y_min + g.y_max)
+        segs = wall_segments(g)
+        shown = [r for r in rows if r["arch_found"]][:examples]
+        for ax, r in zip(row_axes, shown + [None] * (examples - len(shown))):
+            ax.set_axis_off()
+            if r is None:
+                continue
+            fs = data["finals"][str(r["seed"])]
+            arch = set(int(i) for i in r["particles"].split())
+            for i, (xi, ti, al, sp) in enumerate(zip(fs["x"], fs["theta"], fs["alive"],
+                                                     fs["species"])):
+                if not al or abs(xi[0] - neck_x) > 3 * d_b:
+                    continue
+                w = transform(outline_polygon(shapes[int(sp)]), xi, ti)
+                ax.fill(w[:, 0], w[:, 1], color="tab:red" if i in arch else "0.8",
+                        ec="k", lw=0.4)
+            for s in segs:
+                ax.plot(s[:, 0], s[:, 1], "k-", lw=1.2)
+            ax.set_xlim(neck_x - 2.5 * d_b, neck_x + 0.7 * d_b)
+            ax.set_ylim(yc - 1.6 * d_b, yc + 1.6 * d_b)
+            ax.set_aspect("equal")
+            ax.set_title(f"seed {r['seed']}: {r['arch_size']} "
+                         f"(f{r['pair_face'] + r['wall_face']}/v{r['pair_vertex'] + r['wall_vertex']})",
+                         fontsize=7)
+        row_axes[0].text(-0.05, 0.5, label, transform=row_axes[0].transAxes, rotation=90,
+                         ha="right", va="center", fontsize=8)
+    fig.suptitle(f"clogging arches (red; flow left to right; touching: gap <= {tol:g} d_b; "
+                 f"f/v: face/vertex contacts)", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python tools/arches.py",
+                                description="The clogging arches of a finished "
+                                            "tools/figures.py folder.")
+    p.add_argument("folder", help="the figure's --out folder")
+    p.add_argument("--tol", type=float, default=DEFAULT_TOL,
+                   help=f"touching: gap at most this times d_b (default {DEFAULT_TOL})")
+    p.add_argument("--angle", type=float, default=DEFAULT_ANGLE,
+                   help=f"face-to-face: normals opposed within this many degrees "
+                        f"(default {DEFAULT_ANGLE:g})")
+    p.add_argument("--examples", type=int, default=6, help="arches drawn per point (default 6)")
+    try:
+        args = p.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    problems = []
+    if not (0 < args.tol < 1):
+        problems.append(f"--tol must be in (0, 1), got {args.tol:g}")
+    if not (0 < args.angle < 90):
+        problems.append(f"--angle must be in (0, 90) degrees, got {args.angle:g}")
+    if args.examples < 1:
+        problems.append(f"--examples must be >= 1, got {args.examples}")
+    if problems:
+        print("\n".join(problems), file=sys.stderr)
+        return 2
+    folder = Path(args.folder)
+    try:
+        result = analyse_folder(folder, args.tol, args.angle)
+    except ArchError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    with open(folder / "arches.csv", "w", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(COLUMNS)
+        for _, rows, _, _ in result:
+            for r in rows:
+                w.writerow([r.get(k, "") for k in COLUMNS])
+    for label, rows, _, _ in result:
+        print(summary_line(label, rows))
+    draw(result, folder / "arches.png", args.examples, args.tol)
+    print(f"wrote {folder}/arches.csv, arches.png")
+    return 0
