@@ -74,6 +74,24 @@ def test_interval_study_points_are_the_cells_they_are_labelled_with(monkeypatch)
     assert interval(f"fluid.update_interval={steps[-1]}") == steps[-1]
 
 
+def test_grid_study_points_are_the_cells_they_are_labelled_with():
+    """The grid study's points hold the default and solve as often as it does:
+    the interval it gives is what "auto" resolves to on the default grid."""
+    conv = _load("convergence")
+    from taichi_hsdem import load_scene
+    from taichi_hsdem.resolve import FLUID_CELLS_PER_D, resolve
+    vani = ROOT / "scenes" / "vani_phi026.toml"
+    model = resolve(load_scene(vani, ["run.realizations=1"]))
+    assert model.scene.fluid.update_interval == conv.GRID_INTERVAL_STEPS
+    assert FLUID_CELLS_PER_D in conv.GRID_CELLS and conv.GRID_CELLS[0] == max(conv.GRID_CELLS)
+    assert model.d_min == conv.D_VANI
+    for c in conv.GRID_CELLS:
+        m = resolve(load_scene(vani, ["run.realizations=1", f"fluid.cell_size={conv.D_VANI / c!r}",
+                                      f"fluid.update_interval={conv.GRID_INTERVAL_STEPS}"]))
+        # the grid is fitted to the channel: within a cell in 60 of what was asked
+        assert abs(model.d_min / m.fluid_dx - c) < c / 60, (c, model.d_min / m.fluid_dx)
+
+
 def test_sweep_studies_take_set_overrides_at_every_point(tmp_path, capsys):
     # --set reaches every point's resolved scene (e.g. the fixed-obstacle model of
     # the README's earlier studies); a bad key stops before anything is written

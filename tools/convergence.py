@@ -7,6 +7,7 @@
     python tools/convergence.py paper    [--quick] [--out DIR] [--realizations N] [--set K=V]
     python tools/convergence.py interval [--quick] [--out DIR] [--realizations N] [--set K=V]
     python tools/convergence.py solve    [--quick] [--out DIR] [--realizations N] [--set K=V]
+    python tools/convergence.py grid     [--quick] [--out DIR] [--realizations N] [--set K=V]
 
 ``pressure``: the hourglass scene's pressure field (particles as placed) at
 3 ... 12 fluid cells per smallest diameter against a 16-cell reference, sampled at
@@ -44,6 +45,12 @@ point's mean escapees, its change from the 0.5-cell point with a 95 % bootstrap
 interval, and the wall time, in ``interval.csv`` and ``interval.png``;
 ``interval.json`` adds the points up to the default
 (``resolve.UPDATE_CELL_FRACTION``) pooled against the longer ones.
+
+``grid``: the fluid grid alone, like ``interval``: 8, 6 (the default), 5 and 4
+fluid cells per diameter, 100 realizations per point (seeds from 5000), a
+pressure solve every 328 steps at each (the default's one cell, so every point
+solves as often per distance travelled); each point's change from 8 cells, and
+8 and 6 pooled against 5 and 4, in ``grid.csv``, ``grid.json`` and ``grid.png``.
 
 ``solve``: how little pressure solving the vani scene needs: the solve
 tolerance (``fluid.solver_tol``, relative residual) and re-solving only when
@@ -589,61 +596,96 @@ HALF_CELL_STEPS = 164
 
 
 def interval_study(out, quick, realizations=None):
+    from taichi_hsdem.resolve import UPDATE_CELL_FRACTION
+    steps = [int(round(c / 0.5 * HALF_CELL_STEPS)) for c in INTERVAL_CELLS]
+    return _ladder_study(
+        out, quick, realizations, "interval", 3000, INTERVAL_CELLS,
+        [{"fluid.update_interval": k} for k in steps],
+        ["cells_per_solve", "steps"], [[c, k] for c, k in zip(INTERVAL_CELLS, steps)],
+        "half_cell", "default_cells_per_solve", UPDATE_CELL_FRACTION,
+        beyond=lambda c: c > UPDATE_CELL_FRACTION,
+        tag=lambda c, k: f"{c:g} cell{'' if c == 1 else 's'} ({k} steps)",
+        title="fluid cells crossed between pressure solves")
+
+
+# The grid study's fluid cells per diameter (fluid.cell_size = d / c), the finest
+# first (the reference), the default (resolve.FLUID_CELLS_PER_D) among them. The
+# solve interval stays at the default's 328 steps, so every point solves as often
+# per distance travelled: only the grid moves.
+GRID_CELLS = (8, 6, 5, 4)
+GRID_INTERVAL_STEPS = 2 * HALF_CELL_STEPS
+
+
+def grid_study(out, quick, realizations=None):
+    from taichi_hsdem.resolve import FLUID_CELLS_PER_D
+    return _ladder_study(
+        out, quick, realizations, "grid", 5000, GRID_CELLS,
+        [{"fluid.cell_size": D_VANI / c, "fluid.update_interval": GRID_INTERVAL_STEPS}
+         for c in GRID_CELLS],
+        ["cells_per_d", "cell_size"], [[c, D_VANI / c] for c in GRID_CELLS],
+        f"{GRID_CELLS[0]}_cells", "default_cells_per_d", FLUID_CELLS_PER_D,
+        beyond=lambda c: c < FLUID_CELLS_PER_D,
+        tag=lambda c, h: f"{c:g} cells per d",
+        title=f"fluid cells per diameter (a solve every {GRID_INTERVAL_STEPS} steps)")
+
+
+def _ladder_study(out, quick, realizations, name, seed, values, points, value_header,
+                  value_rows, ref_name, default_name, default, beyond, tag, title):
+    """One knob at several values, 100 realizations per point on the same seeds:
+    each point's <s>, its paired change from the first point, the wall time, and
+    the points at or before the default pooled against those beyond it, in
+    ``<name>.csv``, ``<name>.json`` and ``<name>.png``."""
     from taichi_hsdem.stats import mean_difference
     n = realizations or (2 if quick else 100)
-    folder = out / ("interval-quick" if quick else "interval")
-    steps = [int(round(c / 0.5 * HALF_CELL_STEPS)) for c in INTERVAL_CELLS]
-    pts = [_point(folder, r) for r in
-           _sweep("interval", [{"fluid.update_interval": k} for k in steps], folder, n, 3000,
-                  quick)]
+    folder = out / (f"{name}-quick" if quick else name)
+    pts = [_point(folder, r) for r in _sweep(name, points, folder, n, seed, quick)]
     ref = pts[0]
     rows = []
-    for cells, k, pt in zip(INTERVAL_CELLS, steps, pts):
+    for head, pt in zip(value_rows, pts):
         if pt is ref or not pt["escapees"] or not ref["escapees"]:
             diff, lo, hi = (0.0, 0.0, 0.0) if pt is ref else (None, None, None)
         else:
             diff, (lo, hi) = _paired_difference(ref, pt)
-        rows.append([cells, k] + _row(None, None, pt)[2:] + [diff, lo, hi])
-    header = (["cells_per_solve", "steps"] + ROW_HEADER
-              + ["change_from_half_cell", "change_ci_lo", "change_ci_hi"])
-    csv_path = _write(out, "interval", header, rows)
-    # the points up to the default pooled against the longer ones: is there a change
-    # beyond the default that one point's sample is too small to show?
-    from taichi_hsdem.resolve import UPDATE_CELL_FRACTION
+        rows.append(head + _row(None, None, pt)[2:] + [diff, lo, hi])
+    header = (value_header + ROW_HEADER
+              + [f"change_from_{ref_name}", "change_ci_lo", "change_ci_hi"])
+    csv_path = _write(out, name, header, rows)
 
+    # the points up to the default pooled against those beyond: is there a change
+    # beyond the default that one point's sample is too small to show?
     def pool(sel):
-        return ([s for c, pt in zip(INTERVAL_CELLS, pts) if sel(c) for s in pt["escapees"]],
-                [k for c, pt in zip(INTERVAL_CELLS, pts) if sel(c) for k in pt["clogged"]])
-    upto = pool(lambda c: c <= UPDATE_CELL_FRACTION)
-    beyond = pool(lambda c: c > UPDATE_CELL_FRACTION)
+        return ([s for v, pt in zip(values, pts) if sel(v) for s in pt["escapees"]],
+                [k for v, pt in zip(values, pts) if sel(v) for k in pt["clogged"]])
+    upto, past = pool(lambda v: not beyond(v)), pool(beyond)
     pooled = None
-    if upto[0] and beyond[0]:
-        diff, (lo, hi) = mean_difference(upto[0], upto[1], beyond[0], beyond[1])
-        pooled = {"default_cells_per_solve": UPDATE_CELL_FRACTION,
-                  "realizations_up_to_default": len(upto[0]),
-                  "realizations_beyond_default": len(beyond[0]),
+    if upto[0] and past[0]:
+        diff, (lo, hi) = mean_difference(upto[0], upto[1], past[0], past[1])
+        pooled = {default_name: default, "realizations_up_to_default": len(upto[0]),
+                  "realizations_beyond_default": len(past[0]),
                   "change_beyond_minus_up_to": diff, "change_ci95": [lo, hi]}
-    (out / "interval.json").write_text(json.dumps(
-        {"points": [dict(zip(header, r)) for r in rows], "pooled": pooled}, indent=1) + "\n")
+    from taichi_hsdem.output import json_safe
+    (out / f"{name}.json").write_text(json.dumps(json_safe(
+        {"points": [dict(zip(header, r)) for r in rows], "pooled": pooled}), indent=1,
+        allow_nan=False) + "\n")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    xs, ys, lo, hi = _mean_ci_columns(rows)
+    k = len(value_header)
+    xs, ys, lo, hi = _mean_ci_columns([r[k - 2:] for r in rows])
     ax.errorbar(xs, ys, yerr=[ys - lo, hi - ys], fmt="o-", capsize=3)
     for x, y, r in zip(xs, ys, rows):
-        ax.annotate(f"{r[0]:g} cell{'' if r[0] == 1 else 's'} ({r[1]} steps)", (x, y),
-                    textcoords="offset points", xytext=(4, 4), fontsize=7)
+        ax.annotate(tag(r[0], r[1]), (x, y), textcoords="offset points", xytext=(4, 4),
+                    fontsize=7)
     ax.set_xscale("log")
     ax.set_xlabel("wall seconds per simulated realization-second")
     ax.set_ylabel("mean escapees before a clog <s> (95 % interval)")
-    ax.set_title(f"vani scene: fluid cells crossed between pressure solves, "
-                 f"{n} realizations per point", fontsize=9)
+    ax.set_title(f"vani scene: {title}, {n} realizations per point", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out / "interval.png", dpi=120)
+    fig.savefig(out / f"{name}.png", dpi=120)
     plt.close(fig)
-    return rows, csv_path, out / "interval.png"
+    return rows, csv_path, out / f"{name}.png"
 
 
 def _paired_difference(a, b):
@@ -770,21 +812,21 @@ def _escapee_chart(out, rows, n):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("study", choices=("pressure", "contact", "timestep", "escapees", "paper",
-                                      "interval", "solve"))
+                                      "interval", "solve", "grid"))
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default=str(ROOT / "runs" / "convergence"))
     p.add_argument("--realizations", type=int, default=None,
                    help="escapees: realizations per point (default 20, --quick 2); "
-                        "paper: per setting (default 60); interval: per point "
+                        "paper: per setting (default 60); interval, grid: per point "
                         "(default 100); solve: per point (default 20)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                   help="escapees, paper, interval, solve: override a scene scalar at "
+                   help="escapees, paper, interval, solve, grid: override a scene scalar at "
                         "every point (repeatable), e.g. fluid.particle_flux=false for "
                         "the fixed-obstacle model; give another --out to keep both")
     a = p.parse_args(argv)
     SETS[:] = a.set
-    if a.set and a.study not in ("escapees", "paper", "interval", "solve"):
-        p.error(f"--set applies to the escapees, paper, interval and solve studies, "
+    if a.set and a.study not in ("escapees", "paper", "interval", "solve", "grid"):
+        p.error(f"--set applies to the escapees, paper, interval, solve and grid studies, "
                 f"not {a.study}")
     if a.study == "escapees":
         rows, csv_path, png = escapee_study(Path(a.out), a.quick, a.realizations)
@@ -794,6 +836,8 @@ def main(argv=None):
         rows, csv_path, png = interval_study(Path(a.out), a.quick, a.realizations)
     elif a.study == "solve":
         rows, csv_path, png = solve_study(Path(a.out), a.quick, a.realizations)
+    elif a.study == "grid":
+        rows, csv_path, png = grid_study(Path(a.out), a.quick, a.realizations)
     else:
         study = {"pressure": pressure_study, "contact": contact_study,
                  "timestep": timestep_study}[a.study]

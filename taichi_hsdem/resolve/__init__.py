@@ -31,16 +31,16 @@ from .domain import (_bounding_box, _check_feed, _check_fit, _check_steps, _flui
                      _geometry, _initial_poses, _memory_parts, _resolve_intervals,
                      _resolve_solver, _resolve_stepping, _wall_grid_part, open_channel_speed,
                      resolve_particle_flux)
-from .model import (MIN_FLUID_CELLS_ACROSS_CONSTRICTION, MIN_FLUID_CELLS_PER_DIAMETER,
-                    MIN_WALL_CELLS_PER_DIAMETER, NODE_BYTES, SKIN_FRACTION,
-                    UPDATE_CELL_FRACTION, Model, Species, _Resolution, _size_keys)
+from .model import (FLUID_CELLS_PER_D, MIN_FLUID_CELLS_ACROSS_CONSTRICTION,
+                    MIN_FLUID_CELLS_PER_DIAMETER, MIN_WALL_CELLS_PER_DIAMETER, NODE_BYTES,
+                    SKIN_FRACTION, UPDATE_CELL_FRACTION, Model, Species, _Resolution, _size_keys)
 from .particles import (_auto_nodes, _check_nodes, _damping, _ls_spacing, _stiffness,
                         auto_node_spacing, critical_time_step, node_gap, node_sagitta,
                         pair_table, species_shape, wall_table)
 
 __all__ = ["resolve", "Model", "Species", "species_shape", "auto_node_spacing", "node_gap",
            "node_sagitta", "critical_time_step", "open_channel_speed", "pair_table",
-           "wall_table", "UPDATE_CELL_FRACTION"]
+           "wall_table", "UPDATE_CELL_FRACTION", "FLUID_CELLS_PER_D"]
 
 
 def resolve(scene: Scene, arch: str = "x64") -> Model:
@@ -134,7 +134,7 @@ def _resolve(scene: Scene, arch: str) -> Model:
             kps.append(0.0)
     fluid_dx = None
     if f.enabled:
-        fluid_dx = d_min / 6.0 if f.cell_size == "auto" else f.cell_size
+        fluid_dx = d_min / FLUID_CELLS_PER_D if f.cell_size == "auto" else f.cell_size
         if f.cell_size != "auto" and fluid_dx > d_min / MIN_FLUID_CELLS_PER_DIAMETER:
             res.bad("fluid.cell_size", f"{fluid_dx:g} is too coarse for particles of d = "
                     f"{d_min:g}: a particle must span at least "

@@ -15,7 +15,7 @@ from ..geometry.placement import check_initial
 from ..limits import Part
 from ..scene import Scene, SceneError
 from ..scene.keys import AUTO, MAX_PACKING_FRACTION
-from .model import (CHECK_INTERVAL, CHECK_TRAVEL, F32_ONLY_ARCHS, GPU_ARCHS,
+from .model import (CHECK_INTERVAL, CHECK_TRAVEL, F32_ONLY_ARCHS, FLUID_CELLS_PER_D, GPU_ARCHS,
                     MAX_TRAVEL_BETWEEN_SOLVES, UPDATE_CELL_FRACTION, Model, Species,
                     _Resolution)
 
@@ -151,7 +151,8 @@ def _memory_parts(scene: Scene, species: list[Species], all_disks: bool, wall_h:
     if fluid_cells:
         parts.append(Part("fluid.cell_size", f"the fluid grid ({fluid_cells:.3g} cells)",
                           fluid_cells * limits.FLUID_CELL_BYTES,
-                          "use a coarser fluid.cell_size (\"auto\": d_eq / 6)"))
+                          "use a coarser fluid.cell_size "
+                          f"(\"auto\": d_eq / {FLUID_CELLS_PER_D:g})"))
         parts.append(Part("run.realizations" if R > 1 else "fluid.cell_size",
                           f"the pressure solves of {R} realization(s) on {fluid_cells:.3g} "
                           "cells", R * fluid_cells * limits.FLUID_CELL_REALIZATION_BYTES,
@@ -171,8 +172,8 @@ def _fluid_grid(res: _Resolution, model: Model, nx: int, ny: int) -> None:
     model.fluid_dx = dx
     model.fluid_shape = (nx, ny)
     if f.cell_size == "auto":
-        res.note("fluid.cell_size", dx, "smallest particle d_eq / 6, fitted to the channel "
-                 "length")
+        res.note("fluid.cell_size", dx, f"smallest particle d_eq / {FLUID_CELLS_PER_D:g}, fitted "
+                 "to the channel length")
     else:
         res.values["fluid.cell_size"] = dx
     workers = f.workers

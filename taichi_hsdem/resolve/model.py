@@ -18,6 +18,9 @@ MIN_FLUID_CELLS_PER_DIAMETER = 2.0
 MIN_WALL_CELLS_PER_DIAMETER = 4.0
 MIN_LS_CELLS_PER_DIAMETER = 5.0
 MIN_FLUID_CELLS_ACROSS_CONSTRICTION = 3.0
+# fluid.cell_size = "auto": the smallest particle's d_eq over this (README,
+# Accuracy: the pressure study and tools/convergence.py grid)
+FLUID_CELLS_PER_D = 6.0
 # Surface nodes and level sets that follow the shape ("auto"; README, Accuracy):
 PAPER_NODES = 40              # the paper's count: "auto" spaces nodes at most perimeter / 40
 NODE_WIDTH_FRACTION = 1.0     # and at most this fraction of the thinnest part of any
