@@ -127,6 +127,25 @@ def test_thinnest_width_is_the_arm():
     assert dist.thinnest_width(sh.circle(2.0)) == 2.0
 
 
+def test_thinnest_width_finds_a_gentle_neck():
+    # A Cassini oval (a = 1, b = 1.1): a peanut whose waist no sharp corner marks
+    # (400 vertices, turns under 2 degrees). Its waist is the shortest chord
+    # through the origin, 2 sqrt(b^2 - a^2) = 0.9165 (at x = 0: y^2 = b^2 - a^2),
+    # thinner than its lobes' inscribed circles; found to a grid cell of the
+    # search (1/128 of the oval's length, 1 % of the width here).
+    a, b = 1.0, 1.1
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    r = np.sqrt(a * a * np.cos(2 * t) + np.sqrt(b ** 4 - a ** 4 * np.sin(2 * t) ** 2))
+    oval = sh.polygon(np.column_stack([r * np.cos(t), r * np.sin(t)]), n_nodes=400)
+    _, depth = dist.inside_point(oval)
+    assert 2 * depth > 1.2
+    assert dist.thinnest_width(oval) == pytest.approx(2 * np.sqrt(b * b - a * a), rel=0.01)
+    # a tip or a plateau is no neck: the L's arm, the star's and crescent's answers
+    # above stand, and a convex shape is not searched at all
+    assert dist._neck_width(L_SHAPE) == np.inf
+    assert dist._neck_width(sh.polygon(star())) == np.inf
+
+
 def test_respaced_regular_polygons_have_equal_faces():
     # 40 nodes on a hexagon today: faces of 6 and 7 intervals (spacings 0.167 and
     # 0.143 of the edge); "auto" spaces at most perimeter / 40 apart, so 7 each.

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from .polygon import cross, crossings, point_segment_distance, segments_intersect
+from .polygon import cross, crossings, is_convex, point_segment_distance, segments_intersect
 from .shapes import to_body, transform
 
 __all__ = ["signed_distance", "inside_point", "thinnest_width", "overlaps"]
@@ -29,6 +29,13 @@ _REL_TOL = 1.0e-9
 # A vertex that turns the outline inwards by at least this many degrees is a
 # concave corner for `thinnest_width` (not the gentle turns of a concave arc).
 CONCAVE_TURN = 20.0
+
+# `thinnest_width`'s search for necks between two wide parts: the inside sampled
+# on a grid of the outline's size over NECK_CELLS, and a neck counted only when
+# both parts it joins are deeper than it by NECK_MARGIN cells (less is the grid's
+# own ripple along a ridge of constant depth, an arm's midline).
+NECK_CELLS = 128
+NECK_MARGIN = 2.0
 
 # Bound on the (points x edges) temporaries of the polygon distance, so that a
 # fine level-set grid does not allocate gigabytes at once.
@@ -135,7 +142,9 @@ def thinnest_width(shape) -> float:
     Concave corners are vertices that turn the outline inwards by at least
     `CONCAVE_TURN` degrees: the gentle turns of a concave arc drawn as a polygon
     (a crescent's inner edge) do not count, so the width of a tapering horn or a
-    sharp tip, which narrows to nothing, is not taken for the shape's.
+    sharp tip, which narrows to nothing, is not taken for the shape's. A gentle
+    neck between two wider parts (a peanut's waist), which no sharp corner marks,
+    is found as a saddle of the depth inside (`_neck_width`).
 
     Examples
     --------
@@ -169,7 +178,58 @@ def thinnest_width(shape) -> float:
             if np.all(signed_distance(shape, pts) < -1e-9 * size):
                 best = float(dist[e])
                 break
-    return best
+    return min(best, _neck_width(shape))
+
+
+def _neck_width(shape) -> float:
+    """Twice the depth of the shallowest neck joining two deeper parts of a
+    polygon (inf without one), to a grid cell.
+
+    The depth inside (minus the signed distance) peaks in each wide part and
+    dips between two of them at a saddle, the middle of the neck: there the
+    inscribed circle is the neck's width. Cells of a grid over the outline are
+    joined deepest first (union-find); where a cell joins two parts, each
+    deeper than it by more than `NECK_MARGIN` cells, it is a neck. A horn or a
+    tip only narrows away from the body, so it joins nothing and is no neck.
+    """
+    v = shape.vertices
+    if is_convex(v):
+        return math.inf               # the depth has one peak
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    h = float((hi - lo).max()) / NECK_CELLS
+    nx, ny = (np.ceil((hi - lo) / h).astype(int) + 1)
+    gx = lo[0] + h * np.arange(nx)
+    gy = lo[1] + h * np.arange(ny)
+    depth = -signed_distance(shape, np.stack(np.meshgrid(gx, gy, indexing="ij"), -1))
+    inside = depth > 0
+    parent = np.full(nx * ny, -1)
+    peak = np.zeros(nx * ny)          # the deepest cell of each part (at its root)
+
+    def root(k):
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    flat = depth.ravel()
+    neck = math.inf
+    for k in np.argsort(-flat, kind="stable"):
+        if not inside.flat[k]:
+            break
+        parent[k], peak[k] = k, flat[k]
+        i, j = divmod(int(k), ny)
+        for ii, jj in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)):
+            if not (0 <= ii < nx and 0 <= jj < ny) or parent[ii * ny + jj] < 0:
+                continue
+            a, b = root(k), root(ii * ny + jj)
+            if a == b:
+                continue
+            if min(peak[a], peak[b]) > flat[k] + NECK_MARGIN * h:
+                neck = min(neck, 2.0 * float(flat[k]))
+            if peak[a] < peak[b]:
+                a, b = b, a
+            parent[b] = a
+    return neck
 
 
 def overlaps(shape_a, xa, ta, shape_b, xb, tb, gap=0.0) -> bool:

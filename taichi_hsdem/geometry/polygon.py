@@ -19,6 +19,21 @@ def cross(a, b):
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
+def is_convex(poly) -> bool:
+    """Whether a counter-clockwise polygon turns left (or goes straight, to
+    round-off) at every vertex.
+
+    Examples
+    --------
+    >>> is_convex([[0, 0], [2, 0], [2, 2], [0, 2]]), is_convex([[0, 0], [2, 0], [1, 0.5], [1, 2]])
+    (True, False)
+    """
+    v = np.asarray(poly, dtype=float)
+    e = np.roll(v, -1, axis=0) - v
+    size = float(np.ptp(v, axis=0).max())
+    return bool(np.all(cross(e, np.roll(e, -1, axis=0)) >= -1e-12 * size * size))
+
+
 def signed_area(poly) -> float:
     """Shoelace area, positive for a counter-clockwise polygon.
 

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.distance import signed_distance
-from ..geometry.polygon import point_segment_distance
+from ..geometry.polygon import is_convex, point_segment_distance
 from ..geometry.shapes import outline_polygon, to_body, transform
 from ..geometry.walls import wall_distance, wall_segments
 
@@ -59,12 +59,6 @@ def world_outline(shape, x, theta):
     if shape.kind == "circle":
         return None
     return transform(shape.vertices, x, theta)
-
-
-def _convex(v) -> bool:
-    e = np.roll(v, -1, axis=0) - v
-    return bool(np.all(e[:, 0] * np.roll(e, -1, axis=0)[:, 1]
-                       - e[:, 1] * np.roll(e, -1, axis=0)[:, 0] >= 0))
 
 
 def _separation(va, vb) -> float:
@@ -94,7 +88,7 @@ def pair_gap(shape_a, xa, ta, shape_b, xb, tb) -> float:
     vb = world_outline(shape_b, xb, tb)
     vertex = float(min(signed_distance(shape_b, to_body(va, xb, tb)).min(),
                        signed_distance(shape_a, to_body(vb, xa, ta)).min()))
-    if vertex > 0 or not (_convex(shape_a.vertices) and _convex(shape_b.vertices)):
+    if vertex > 0 or not (is_convex(shape_a.vertices) and is_convex(shape_b.vertices)):
         return vertex
     return min(vertex, _separation(va, vb))
 
@@ -339,7 +333,8 @@ def summary_line(label, rows) -> str:
     wv = sum(r["wall_vertex"] for r in found)
     mean = np.mean([r["arch_size"] for r in found]) if found else math.nan
     parts = [f"{label}: {len(rows)} clogged, arch found in {len(found)}",
-             "sizes " + ", ".join(f"{k}: {sizes[k]}" for k in sorted(sizes)) + f" (mean {mean:.2f})"]
+             "sizes " + ", ".join(f"{k}: {sizes[k]}" for k in sorted(sizes))
+             + f" (mean {mean:.2f})"]
     if pf + pv:
         parts.append(f"particle-particle contacts face {pf}, vertex {pv} "
                      f"({pf / (pf + pv):.0%} face)")
@@ -381,9 +376,9 @@ def draw(result, path, examples=6, tol=DEFAULT_TOL):
             ax.set_xlim(neck_x - 2.5 * d_b, neck_x + 0.7 * d_b)
             ax.set_ylim(yc - 1.6 * d_b, yc + 1.6 * d_b)
             ax.set_aspect("equal")
-            ax.set_title(f"seed {r['seed']}: {r['arch_size']} "
-                         f"(f{r['pair_face'] + r['wall_face']}/v{r['pair_vertex'] + r['wall_vertex']})",
-                         fontsize=7)
+            faces = r["pair_face"] + r["wall_face"]
+            corners = r["pair_vertex"] + r["wall_vertex"]
+            ax.set_title(f"seed {r['seed']}: {r['arch_size']} (f{faces}/v{corners})", fontsize=7)
         row_axes[0].text(-0.05, 0.5, label, transform=row_axes[0].transAxes, rotation=90,
                          ha="right", va="center", fontsize=8)
     fig.suptitle(f"clogging arches (red; flow left to right; touching: gap <= {tol:g} d_b; "
