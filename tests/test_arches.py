@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichi_hsdem.geometry.shapes import circle, regular_polygon, square
-from taichi_hsdem.geometry.walls import converging
+from taichi_hsdem.geometry.shapes import circle, rectangle, regular_polygon, square
+from taichi_hsdem.geometry.walls import converging, wall_distance
 from taichi_hsdem.studies import arches
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,6 +27,11 @@ def test_gap_between_outlines_is_their_distance_or_minus_the_deepest_vertex():
     assert arches.pair_gap(d, [1.3, 0.2], 0.0, sq, [0, 0], 0.0) == pytest.approx(0.3, abs=1e-12)
     assert arches.pair_gap(sq, [0, 0], 0.0, d, [1.3, 0.2], 0.0) == pytest.approx(0.3, abs=1e-12)
     assert arches.pair_gap(d, [0, 0], 0.0, d, [0.9, 0], 0.0) == pytest.approx(-0.1, abs=1e-12)
+    # two rods crossed at their centres: no vertex of either inside the other, and
+    # yet they overlap by the rod's width (the shorter way out of the cross)
+    rod = rectangle(1.0, 0.1)
+    assert arches.pair_gap(rod, [0, 0], 0.0, rod, [0, 0], math.pi / 2) == \
+        pytest.approx(-0.55, abs=1e-12)
 
 
 def test_face_to_face_and_vertex_contacts_are_told_apart():
@@ -44,6 +49,14 @@ def test_face_to_face_and_vertex_contacts_are_told_apart():
     assert arches.pair_kind(sq, [0, 0], 0.0, sq, [x, 0], math.pi / 4, tol) == "vertex"
     # faces that meet only at a corner (shifted by almost a side) are not face-to-face
     assert arches.pair_kind(sq, [0, 0], 0.0, sq, [1 - EPS, 0.9], 0.0, tol) == "vertex"
+    # pressed deeper than tol, still face to face; and either way round
+    assert arches.pair_kind(sq, [0, 0], 0.0, sq, [0.994, 0.3], 0.0, 0.005) == "face"
+    slab = rectangle(4.0, 0.5)
+    c = [0.3, 0.25 + 0.5 - EPS + 0.5 * math.sin(math.radians(0.5))]
+    for args in ((slab, [0, 0], 0.0, sq, c, math.radians(0.5)),
+                 (sq, c, math.radians(0.5), slab, [0, 0], 0.0)):
+        assert arches.pair_gap(*args) < 0
+        assert arches.pair_kind(*args, tol) == "face"
     hexa = regular_polygon(6, 1.0)            # vertex 0 on +x: flat faces up and down
     h = math.sqrt(3) / 2                        # width across the flats
     assert arches.pair_kind(hexa, [0, 0], 0.0, hexa, [0.2, h - EPS], 0.0, tol) == "face"
@@ -66,6 +79,13 @@ def test_a_square_flat_on_the_wall_is_a_face_contact_and_on_its_corner_a_vertex(
     assert sides.gap(sq, flat, 0.0, 1) > 9
     assert arches.wall_kind(sides, 0, sq, flat, 0.0, 0.01) == "face"
     assert arches.wall_kind(sides, 0, sq, corner, math.pi / 4, 0.01) == "vertex"
+    # a face on a long wall, tilted 0.5 degrees, still lies along it (its ends
+    # 0.0022 off the wall); tilted 3 degrees, only its corner touches
+    for tilt, kind in ((0.5, "face"), (3.0, "vertex")):
+        a = math.radians(tilt)
+        low = [3.0, y0 + 0.25 * (math.cos(a) + math.sin(a)) - EPS]
+        assert sides.gap(sq, low, a, 0) == pytest.approx(-EPS, abs=1e-12)
+        assert arches.wall_kind(sides, 0, sq, low, a, 0.01) == kind, tilt
     # on the upper wall, and on the 45 degree taper (a diamond's face lies along it)
     assert arches.wall_kind(sides, 1, sq, [3.0, g.y_max - 0.25 + EPS], 0.0, 0.01) == "face"
     neck = g.constriction_x0
@@ -73,6 +93,19 @@ def test_a_square_flat_on_the_wall_is_a_face_contact_and_on_its_corner_a_vertex(
     c = np.array([neck - 1.0, -0.6 - 1.0]) + (0.25 - EPS) * np.array([-1.0, 1.0]) / math.sqrt(2)
     assert sides.gap(sq, c, math.pi / 4, 0) == pytest.approx(-EPS, abs=1e-9)
     assert arches.wall_kind(sides, 0, sq, c, math.pi / 4, 0.01) == "face"
+
+
+def test_the_side_walls_are_the_outline_runs_between_inlet_and_outlet():
+    # an upper wall with a notch dipping below the centre line is still the upper wall
+    from taichi_hsdem.geometry.walls import from_polygon
+    g = from_polygon([[0, 0], [10, 0], [10, 3], [6, 3], [6, 0.5], [4, 0.5], [4, 3], [0, 3]])
+    sides = arches.Sides(g)
+    assert len(sides.segments[0]) == 1 and len(sides.segments[1]) == 5
+    assert [[6.0, 0.5], [4.0, 0.5]] in sides.segments[1].tolist()
+    assert sides.segments[0].tolist() == [[[0.0, 0.0], [10.0, 0.0]]]
+    for s, n in zip(sides.segments, sides.normals):     # into the fluid
+        probe = s.mean(axis=1) + 1e-3 * n
+        assert (wall_distance(g, probe) > 0).all()
 
 
 def _disk_arch():

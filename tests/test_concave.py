@@ -131,19 +131,29 @@ def test_thinnest_width_finds_a_gentle_neck():
     # A Cassini oval (a = 1, b = 1.1): a peanut whose waist no sharp corner marks
     # (400 vertices, turns under 2 degrees). Its waist is the shortest chord
     # through the origin, 2 sqrt(b^2 - a^2) = 0.9165 (at x = 0: y^2 = b^2 - a^2),
-    # thinner than its lobes' inscribed circles; found to a grid cell of the
-    # search (1/128 of the oval's length, 1 % of the width here).
+    # thinner than its lobes' inscribed circles. The search finds it to a cell of
+    # its grid (1/128 of the oval's length, 2.5 % of the waist), turned any way.
     a, b = 1.0, 1.1
     t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
     r = np.sqrt(a * a * np.cos(2 * t) + np.sqrt(b ** 4 - a ** 4 * np.sin(2 * t) ** 2))
-    oval = sh.polygon(np.column_stack([r * np.cos(t), r * np.sin(t)]), n_nodes=400)
-    _, depth = dist.inside_point(oval)
-    assert 2 * depth > 1.2
-    assert dist.thinnest_width(oval) == pytest.approx(2 * np.sqrt(b * b - a * a), rel=0.01)
+    waist = 2 * np.sqrt(b * b - a * a)
+    for turn in (0.0, 10.0, 45.0):
+        c, s = np.cos(np.radians(turn)), np.sin(np.radians(turn))
+        pts = np.column_stack([r * np.cos(t), r * np.sin(t)]) @ np.array([[c, s], [-s, c]])
+        oval = sh.polygon(pts, n_nodes=400)
+        _, depth = dist.inside_point(oval)
+        assert 2 * depth > 1.2
+        cell = dist._neck_width(oval)[1]
+        assert abs(dist.thinnest_width(oval) - waist) <= cell, turn
     # a tip or a plateau is no neck: the L's arm, the star's and crescent's answers
     # above stand, and a convex shape is not searched at all
-    assert dist._neck_width(L_SHAPE) == np.inf
-    assert dist._neck_width(sh.polygon(star())) == np.inf
+    assert dist._neck_width(L_SHAPE)[0] == np.inf
+    assert dist._neck_width(sh.polygon(star()))[0] == np.inf
+    # a U (base and arms 1 wide) keeps its exact chord: the search's saddle between
+    # the two corners (a cell or two low) does not replace it
+    u = sh.polygon([[0, 0], [3, 0], [3, 3], [2, 3], [2, 1], [1, 1], [1, 3], [0, 3]])
+    assert dist._neck_width(u)[0] < 1.0
+    assert dist.thinnest_width(u) == pytest.approx(1.0)
 
 
 def test_respaced_regular_polygons_have_equal_faces():

@@ -178,23 +178,28 @@ def thinnest_width(shape) -> float:
             if np.all(signed_distance(shape, pts) < -1e-9 * size):
                 best = float(dist[e])
                 break
-    return min(best, _neck_width(shape))
+    neck, cell = _neck_width(shape)
+    # a neck only where no chord or inscribed circle already gave that width (the
+    # search's grid answers a chord's exact width a cell or two low)
+    return neck if neck < best - NECK_MARGIN * cell else best
 
 
-def _neck_width(shape) -> float:
+def _neck_width(shape) -> tuple[float, float]:
     """Twice the depth of the shallowest neck joining two deeper parts of a
-    polygon (inf without one), to a grid cell.
+    polygon (inf without one), and the search's grid cell: the width is found to
+    about one cell (the ridge of the depth is crossed between grid points).
 
     The depth inside (minus the signed distance) peaks in each wide part and
     dips between two of them at a saddle, the middle of the neck: there the
     inscribed circle is the neck's width. Cells of a grid over the outline are
-    joined deepest first (union-find); where a cell joins two parts, each
-    deeper than it by more than `NECK_MARGIN` cells, it is a neck. A horn or a
-    tip only narrows away from the body, so it joins nothing and is no neck.
+    joined deepest first to their eight neighbours (union-find); where a cell
+    joins two parts, each deeper than it by more than `NECK_MARGIN` cells, it is
+    a neck. A horn or a tip only narrows away from the body, so it joins nothing
+    and is no neck.
     """
     v = shape.vertices
     if is_convex(v):
-        return math.inf               # the depth has one peak
+        return math.inf, 0.0          # the depth has one peak
     lo, hi = v.min(axis=0), v.max(axis=0)
     h = float((hi - lo).max()) / NECK_CELLS
     nx, ny = (np.ceil((hi - lo) / h).astype(int) + 1)
@@ -218,7 +223,8 @@ def _neck_width(shape) -> float:
             break
         parent[k], peak[k] = k, flat[k]
         i, j = divmod(int(k), ny)
-        for ii, jj in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)):
+        for ii, jj in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1),
+                       (i - 1, j - 1), (i - 1, j + 1), (i + 1, j - 1), (i + 1, j + 1)):
             if not (0 <= ii < nx and 0 <= jj < ny) or parent[ii * ny + jj] < 0:
                 continue
             a, b = root(k), root(ii * ny + jj)
@@ -229,7 +235,7 @@ def _neck_width(shape) -> float:
             if peak[a] < peak[b]:
                 a, b = b, a
             parent[b] = a
-    return neck
+    return neck, h
 
 
 def overlaps(shape_a, xa, ta, shape_b, xb, tb, gap=0.0) -> bool:

@@ -11,12 +11,14 @@ contacts:
 * two outlines **touch** when their gap is at most ``tol`` times the bounding
   diameter ``d_b`` (a pressed contact has a small overlap, a negative gap); the gap
   is exact for outlines apart (the nearest points of two polygons are a vertex of
-  one and an edge of the other, or a wall corner), and for outlines that overlap it
-  is minus the deepest vertex's depth;
+  one and an edge of the other, or a wall corner); for two convex outlines that
+  overlap it is minus the penetration depth (the separating-axis test), for
+  others minus the deepest vertex's depth;
 * a contact is **face-to-face** when an edge of one outline lies along an edge of
-  the other (or along the wall): normals opposed within ``angle`` degrees, the
-  lines within ``tol d_b`` of each other, and a common stretch of at least
-  ``FACE_OVERLAP`` of the shorter edge; otherwise it is a **vertex** contact (a
+  the other (or along the wall): normals opposed within ``angle`` degrees and,
+  over a common stretch of at least ``FACE_OVERLAP`` of the shorter edge, the one
+  within ``tol d_b`` outside the other's line (or pressed into it by at most
+  ``FACE_OVERLAP`` of the shorter edge); otherwise it is a **vertex** contact (a
   corner on a face or on a corner). A circle's contacts are all ``curved``.
 
 Used as ``python tools/arches.py DIR`` on a finished ``tools/figures.py`` folder:
@@ -86,34 +88,52 @@ def pair_gap(shape_a, xa, ta, shape_b, xb, tb) -> float:
         return float(signed_distance(shape_a, to_body(xb[None], xa, ta))[0] - shape_b.radius)
     va = world_outline(shape_a, xa, ta)
     vb = world_outline(shape_b, xb, tb)
-    vertex = float(min(signed_distance(shape_b, to_body(va, xb, tb)).min(),
-                       signed_distance(shape_a, to_body(vb, xa, ta)).min()))
-    if vertex > 0 or not (is_convex(shape_a.vertices) and is_convex(shape_b.vertices)):
-        return vertex
-    return min(vertex, _separation(va, vb))
+    if is_convex(shape_a.vertices) and is_convex(shape_b.vertices):
+        # overlapping convex outlines may hold no vertex of each other (a cross)
+        sep = _separation(va, vb)
+        if sep <= 0:
+            return sep
+    return float(min(signed_distance(shape_b, to_body(va, xb, tb)).min(),
+                     signed_distance(shape_a, to_body(vb, xa, ta)).min()))
 
 
 class Sides:
-    """The two side walls of a channel along x: lower (y below the centre line)
-    and upper, as segments with their normals into the fluid."""
+    """The two side walls of a channel along x, as segments with their normals
+    into the fluid: the lower wall is the outline's run (counter-clockwise) from
+    the inlet to the outlet, the upper one the run back."""
 
     def __init__(self, geometry):
         if geometry.obstacles:
             raise ArchError("the arch analysis needs a channel with two side walls and "
                             "no obstacles")
-        segs = wall_segments(geometry)
-        yc = 0.5 * (geometry.y_min + geometry.y_max)
-        mid = segs.mean(axis=1)
+        v = np.asarray(geometry.outline, float)
+        w = np.roll(v, -1, axis=0)
+        tol = 1e-9 * max(geometry.x_max - geometry.x_min, geometry.y_max - geometry.y_min)
+
+        def on(x):
+            return (np.abs(v[:, 0] - x) <= tol) & (np.abs(w[:, 0] - x) <= tol)
+        inlet, outlet = on(geometry.x_min), on(geometry.x_max)
+        if not inlet.any() or not outlet.any():
+            raise ArchError("the arch analysis needs a channel with an open inlet and outlet")
+        # walk counter-clockwise from the last inlet edge: lower wall until the
+        # outlet, upper wall after it
+        start = int(np.flatnonzero(inlet)[-1])
+        runs, side = ([], []), 0
+        for k in ((start + 1 + np.arange(len(v))) % len(v)):
+            if inlet[k]:
+                continue
+            if outlet[k]:
+                side = 1
+                continue
+            runs[side].append([v[k], w[k]])
         self.geometry = geometry
-        self.segments = [segs[mid[:, 1] < yc], segs[mid[:, 1] >= yc]]
+        self.segments = [np.array(r, float).reshape(-1, 2, 2) for r in runs]
         self.normals = []
         for s in self.segments:
             t = s[:, 1] - s[:, 0]
-            n = np.stack([-t[:, 1], t[:, 0]], axis=1) / np.hypot(t[:, 0], t[:, 1])[:, None]
-            # into the fluid: checked a little way off each segment's middle
-            probe = s.mean(axis=1) + 1e-6 * np.hypot(t[:, 0], t[:, 1])[:, None] * n
-            n *= np.where(wall_distance(geometry, probe) > 0, 1.0, -1.0)[:, None]
-            self.normals.append(n)
+            # fluid on the left of a counter-clockwise outline
+            self.normals.append(np.stack([-t[:, 1], t[:, 0]], axis=1)
+                                / np.hypot(t[:, 0], t[:, 1])[:, None])
 
     def _point_gap(self, pts, k):
         """Signed distance of points to side ``k`` (negative inside that wall)."""
@@ -143,24 +163,36 @@ def _edges(v):
     return a, b, t, np.stack([t[:, 1], -t[:, 0]], axis=1), length
 
 
+def _lies_along(p0, p1, length, n, q0, q1, other_length, tol) -> bool:
+    """Does edge q0-q1 lie along edge p0-p1 (outward normal n)? Over their common
+    stretch along p's line, at least FACE_OVERLAP of the shorter edge, q stays
+    within ``tol`` outside p's line, or inside it (pressed in) by at most
+    FACE_OVERLAP of the shorter edge."""
+    t = (p1 - p0) / length
+    s0, s1 = float((q0 - p0) @ t), float((q1 - p0) @ t)
+    lo, hi = max(min(s0, s1), 0.0), min(max(s0, s1), length)
+    shorter = min(length, other_length)
+    if s0 == s1 or hi - lo < FACE_OVERLAP * shorter:
+        return False
+    for s in (lo, hi):      # q at the ends of the common stretch, off p's line
+        off = float((q0 + (s - s0) / (s1 - s0) * (q1 - q0) - p0) @ n)
+        if not (-FACE_OVERLAP * shorter <= off <= tol):
+            return False
+    return True
+
+
 def _faces_touch(a, b, n_a, n_b, tol, angle) -> bool:
-    """Do edge sets ``a`` (starts, ends, normals) and ``b`` hold an opposed pair
-    lying along each other (see the module notes)?"""
+    """Do edge sets ``a`` (starts, ends, lengths; outward normals ``n_a``) and
+    ``b`` hold an opposed pair lying along each other (normals opposed within
+    ``angle`` degrees; `_lies_along` seen from either edge)?"""
     (a0, a1, len_a), (b0, b1, len_b) = a, b
     cos = math.cos(math.radians(angle))
     for i in range(len(a0)):
-        t = (a1[i] - a0[i]) / len_a[i]
         for j in range(len(b0)):
             if float(n_a[i] @ n_b[j]) > -cos:
                 continue
-            # the other edge's ends, along and across this edge's line
-            ends = np.stack([b0[j], b1[j]]) - a0[i]
-            across = np.abs(ends @ n_a[i])
-            if across.max() > tol:
-                continue
-            s = np.sort(ends @ t)
-            common = min(s[1], len_a[i]) - max(s[0], 0.0)
-            if common >= FACE_OVERLAP * min(len_a[i], len_b[j]):
+            if (_lies_along(a0[i], a1[i], len_a[i], n_a[i], b0[j], b1[j], len_b[j], tol)
+                    or _lies_along(b0[j], b1[j], len_b[j], n_b[j], a0[i], a1[i], len_a[i], tol)):
                 return True
     return False
 
@@ -195,8 +227,8 @@ def find_arch(shapes, x, theta, alive, species, sides, neck_x, d_b, tol=DEFAULT_
     """The arch of one configuration, or None when no chain of touching particles
     joins the two side walls.
 
-    Returns ``{"particles": [i, ...] from the lower wall up, "pairs": [kind, ...],
-    "walls": [kind_lower, kind_upper], "gaps": [...]}``.
+    Returns ``{"particles": [i, ...] from the lower wall up, "pairs": [kind of
+    each neighbouring pair], "walls": [kind on the lower wall, on the upper]}``.
     """
     x = np.asarray(x, float)
     theta = np.asarray(theta, float)
@@ -335,11 +367,15 @@ def summary_line(label, rows) -> str:
     parts = [f"{label}: {len(rows)} clogged, arch found in {len(found)}",
              "sizes " + ", ".join(f"{k}: {sizes[k]}" for k in sorted(sizes))
              + f" (mean {mean:.2f})"]
+    pc = sum(r["pair_curved"] for r in found)
+    wc = sum(r["wall_curved"] for r in found)
     if pf + pv:
         parts.append(f"particle-particle contacts face {pf}, vertex {pv} "
                      f"({pf / (pf + pv):.0%} face)")
     if wf + wv:
         parts.append(f"on the walls face {wf}, vertex {wv}")
+    if pc + wc:
+        parts.append(f"curved contacts {pc} between particles, {wc} on the walls")
     return "; ".join(parts)
 
 
