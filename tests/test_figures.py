@@ -240,6 +240,17 @@ def test_escapees_time_quick(tmp_path, capsys, monkeypatch):
     # Resumable: the finished point was kept, and the same command reads it back
     # instead of running it (the outputs come out the same) ...
     assert (out / "points" / "phi=0.26.json").is_file()
+    # with every realization's final state, for tools/arches.py: one per seed, a
+    # pose per particle slot, read back as kept
+    kept = json.loads((out / "points" / "phi=0.26.json").read_text())
+    assert sorted(kept["finals"]) == sorted(str(r["seed"]) for r in kept["rows"])
+    for state in kept["finals"].values():
+        n = len(state["species"])
+        assert n >= 1 and len(state["x"]) == len(state["theta"]) == len(state["alive"]) == n
+        assert all(len(xy) == 2 for xy in state["x"])
+    path = out / "points" / "phi=0.26.json"
+    back = points.load_point(path, kept["key"], points.Point("phi=0.26", {}, None))
+    assert back.finals == {int(k): v for k, v in kept["finals"].items()}
     written = {n: (out / n).read_text() for n in ("points.csv", "realizations.csv",
                                                    "series.csv")}
 
