@@ -672,6 +672,7 @@ def _ladder_study(out, quick, realizations, name, seed, values, points, value_he
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     k = len(value_header)
     xs, ys, lo, hi = _mean_ci_columns([r[k - 2:] for r in rows])
@@ -680,6 +681,11 @@ def _ladder_study(out, quick, realizations, name, seed, values, points, value_he
         ax.annotate(tag(r[0], r[1]), (x, y), textcoords="offset points", xytext=(4, 4),
                     fontsize=7)
     ax.set_xscale("log")
+    # plain numbers: a range within one decade gets no decade ticks to label
+    plain = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+    ax.xaxis.set_major_formatter(plain)
+    ax.xaxis.set_minor_formatter(plain)
+    ax.tick_params(axis="x", which="minor", labelsize=7)
     ax.set_xlabel("wall seconds per simulated realization-second")
     ax.set_ylabel("mean escapees before a clog <s> (95 % interval)")
     ax.set_title(f"vani scene: {title}, {n} realizations per point", fontsize=9)
