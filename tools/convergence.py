@@ -599,7 +599,7 @@ def interval_study(out, quick, realizations=None):
     from taichi_hsdem.resolve import UPDATE_CELL_FRACTION
     steps = [int(round(c / 0.5 * HALF_CELL_STEPS)) for c in INTERVAL_CELLS]
     return _ladder_study(
-        out, quick, realizations, "interval", 3000, INTERVAL_CELLS,
+        out, quick, realizations, "interval", 3000,
         [{"fluid.update_interval": k} for k in steps],
         ["cells_per_solve", "steps"], [[c, k] for c, k in zip(INTERVAL_CELLS, steps)],
         "half_cell", "default_cells_per_solve", UPDATE_CELL_FRACTION,
@@ -621,7 +621,7 @@ GRID_INTERVAL_STEPS = 2 * HALF_CELL_STEPS
 def grid_study(out, quick, realizations=None):
     from taichi_hsdem.resolve import FLUID_CELLS_PER_D
     return _ladder_study(
-        out, quick, realizations, "grid", 5000, GRID_CELLS,
+        out, quick, realizations, "grid", 5000,
         [{"fluid.cell_size": D_VANI / c, "fluid.update_interval": GRID_INTERVAL_STEPS}
          for c in GRID_CELLS],
         ["cells_per_d", "cell_size"], [[c, D_VANI / c] for c in GRID_CELLS],
@@ -631,8 +631,8 @@ def grid_study(out, quick, realizations=None):
         title=f"fluid cells per diameter (a solve every {GRID_INTERVAL_STEPS} steps)")
 
 
-def _ladder_study(out, quick, realizations, name, seed, values, points, value_header,
-                  value_rows, ref_name, default_name, default, beyond, tag, title):
+def _ladder_study(out, quick, realizations, name, seed, points, value_header, value_rows,
+                  ref_name, default_name, default, beyond, tag, title):
     """One knob at several values, 100 realizations per point on the same seeds:
     each point's <s>, its paired change from the first point, the wall time, and
     the points at or before the default pooled against those beyond it, in
@@ -656,8 +656,9 @@ def _ladder_study(out, quick, realizations, name, seed, values, points, value_he
     # the points up to the default pooled against those beyond: is there a change
     # beyond the default that one point's sample is too small to show?
     def pool(sel):
-        return ([s for v, pt in zip(values, pts) if sel(v) for s in pt["escapees"]],
-                [k for v, pt in zip(values, pts) if sel(v) for k in pt["clogged"]])
+        chosen = [pt for head, pt in zip(value_rows, pts) if sel(head[0])]
+        return ([s for pt in chosen for s in pt["escapees"]],
+                [k for pt in chosen for k in pt["clogged"]])
     upto, past = pool(lambda v: not beyond(v)), pool(beyond)
     pooled = None
     if upto[0] and past[0]:

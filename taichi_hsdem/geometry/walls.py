@@ -571,11 +571,23 @@ def _open_intervals(poly: np.ndarray, x_edge: float, tol: float) -> np.ndarray:
     return ys.reshape(-1, 2)
 
 
+def open_edges(outline, x_min, x_max) -> tuple[np.ndarray, np.ndarray]:
+    """Which edges of an outline (edge k from vertex k to k + 1) are the inlet
+    (on ``x = x_min``) and which the outlet (on ``x = x_max``): two boolean masks."""
+    outline = np.asarray(outline, dtype=float)
+    tol = _REL_TOL * max(float(np.ptp(outline, axis=0).max()), 1e-300)
+    a, b = _edges(outline)
+
+    def on(x):
+        return (np.abs(a[:, 0] - x) <= tol) & (np.abs(b[:, 0] - x) <= tol)
+    return on(x_min), on(x_max)
+
+
 def _wall_data(outline, obstacles, x_min, x_max) -> _WallData:
     tol = _REL_TOL * max(float(np.ptp(outline, axis=0).max()), 1e-300)
     a, b = _edges(outline)
-    open_edge = ((np.abs(a[:, 0] - x_min) <= tol) & (np.abs(b[:, 0] - x_min) <= tol)) | \
-                ((np.abs(a[:, 0] - x_max) <= tol) & (np.abs(b[:, 0] - x_max) <= tol))
+    inlet_edge, outlet_edge = open_edges(outline, x_min, x_max)
+    open_edge = inlet_edge | outlet_edge
     wall_a = [a[~open_edge]]
     wall_b = [b[~open_edge]]
     edge_a, edge_b = [a], [b]

@@ -41,7 +41,7 @@ import numpy as np
 from ..geometry.distance import signed_distance
 from ..geometry.polygon import is_convex, point_segment_distance
 from ..geometry.shapes import outline_polygon, to_body, transform
-from ..geometry.walls import wall_distance, wall_segments
+from ..geometry.walls import open_edges, wall_distance, wall_segments
 
 DEFAULT_TOL = 0.01       # touching: gap <= tol * d_b
 DEFAULT_ANGLE = 10.0     # face-to-face: normals opposed within this many degrees
@@ -68,7 +68,7 @@ def _separation(va, vb) -> float:
     minus the penetration depth when they overlap (the separating-axis test)."""
     best = -math.inf
     for v, w in ((va, vb), (vb, va)):
-        _, _, _, n, _ = _edges(v)
+        _, _, n, _ = _edges(v)
         # along each edge's outward normal: how far the other's nearest vertex lies past it
         past = np.einsum("ijk,ik->ij", w[None, :, :] - v[:, None, :], n).min(axis=1)
         best = max(best, float(past.max()))
@@ -108,11 +108,7 @@ class Sides:
                             "no obstacles")
         v = np.asarray(geometry.outline, float)
         w = np.roll(v, -1, axis=0)
-        tol = 1e-9 * max(geometry.x_max - geometry.x_min, geometry.y_max - geometry.y_min)
-
-        def on(x):
-            return (np.abs(v[:, 0] - x) <= tol) & (np.abs(w[:, 0] - x) <= tol)
-        inlet, outlet = on(geometry.x_min), on(geometry.x_max)
+        inlet, outlet = open_edges(v, geometry.x_min, geometry.x_max)
         if not inlet.any() or not outlet.any():
             raise ArchError("the arch analysis needs a channel with an open inlet and outlet")
         # walk counter-clockwise from the last inlet edge: lower wall until the
@@ -155,12 +151,11 @@ class Sides:
 
 
 def _edges(v):
-    """(start, end, unit tangent, outward normal, length) of a CCW polygon's edges."""
+    """(start, end, outward unit normal, length) of a CCW polygon's edges."""
     a, b = v, np.roll(v, -1, axis=0)
     t = b - a
     length = np.hypot(t[:, 0], t[:, 1])
-    t = t / length[:, None]
-    return a, b, t, np.stack([t[:, 1], -t[:, 0]], axis=1), length
+    return a, b, np.stack([t[:, 1], -t[:, 0]], axis=1) / length[:, None], length
 
 
 def _lies_along(p0, p1, length, n, q0, q1, other_length, tol) -> bool:
@@ -201,8 +196,8 @@ def pair_kind(shape_a, xa, ta, shape_b, xb, tb, tol, angle=DEFAULT_ANGLE) -> str
     """``"face"``, ``"vertex"`` or (a circle in it) ``"curved"`` for a touching pair."""
     if shape_a.kind == "circle" or shape_b.kind == "circle":
         return "curved"
-    a0, a1, _, na, la = _edges(world_outline(shape_a, xa, ta))
-    b0, b1, _, nb, lb = _edges(world_outline(shape_b, xb, tb))
+    a0, a1, na, la = _edges(world_outline(shape_a, xa, ta))
+    b0, b1, nb, lb = _edges(world_outline(shape_b, xb, tb))
     return "face" if _faces_touch((a0, a1, la), (b0, b1, lb), na, nb, tol, angle) else "vertex"
 
 
@@ -210,7 +205,7 @@ def wall_kind(sides, k, shape, x, theta, tol, angle=DEFAULT_ANGLE) -> str:
     """The same for a particle on side wall ``k``: a face flat on the wall or not."""
     if shape.kind == "circle":
         return "curved"
-    a0, a1, _, na, la = _edges(world_outline(shape, x, theta))
+    a0, a1, na, la = _edges(world_outline(shape, x, theta))
     s = sides.segments[k]
     ls = np.hypot(*(s[:, 1] - s[:, 0]).T)
     # the wall, seen as a body, faces the fluid: its normal opposes the particle's face
