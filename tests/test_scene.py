@@ -114,7 +114,7 @@ def test_file_scene_values_and_defaults(tmp_path):
     assert scene.run.arch == "cpu" and scene.run.precision == "f64"
     assert scene.fluid.cell_size == "auto" and scene.fluid.p_out == 0.0
     assert scene.fluid.p_in is None
-    assert scene.fluid.update_interval == "auto" and scene.fluid.solver_tol == 1e-8
+    assert scene.fluid.update_interval == "auto" and scene.fluid.solver_tol == 1e-6
     geometry = scene.geometry
     assert geometry.angle == 45.0 and geometry.constriction_length == 0.0
     assert geometry.width_out == 4e-4  # default: width_in

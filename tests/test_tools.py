@@ -92,6 +92,21 @@ def test_grid_study_points_are_the_cells_they_are_labelled_with():
         assert abs(model.d_min / m.fluid_dx - c) < c / 60, (c, model.d_min / m.fluid_dx)
 
 
+def test_solve_study_labels_its_base_point_with_the_scene_defaults():
+    """The solve study's first point is the vani scene as shipped: the values it
+    is labelled with (and measured against) are what the scene resolves to, and no
+    other point repeats them."""
+    conv = _load("convergence")
+    from taichi_hsdem import load_scene
+    from taichi_hsdem.resolve import resolve
+    model = resolve(load_scene(ROOT / "scenes" / "vani_phi026.toml", ["run.realizations=1"]))
+    fluid = model.scene.fluid
+    assert conv.SOLVE_DEFAULTS == {"fluid.solver_tol": fluid.solver_tol,
+                                   "fluid.resolve_fraction": fluid.resolve_fraction}
+    for _label, key, values in conv.SOLVE_KNOBS:
+        assert conv.SOLVE_DEFAULTS[key] not in values
+
+
 def test_sweep_studies_take_set_overrides_at_every_point(tmp_path, capsys):
     # --set reaches every point's resolved scene (e.g. the fixed-obstacle model of
     # the README's earlier studies); a bad key stops before anything is written

@@ -152,7 +152,7 @@ class FluidConfig(Config):
                            "the backend has float64 kernels (CPU, CUDA), else amg", AUTO,
                            choices=("auto", "gmg", "amg"))
     solver_tol: float = keyfield("float", "relative residual of the multigrid solve, "
-                                "dimensionless", 1e-8, gt=0, le=1e-2)
+                                "dimensionless", 1e-6, gt=0, le=1e-2)
     workers: int | str = keyfield("int", "processes that share the realizations' pressure "
                                  'solves; "auto": one per usable CPU, at most one per '
                                  "realization (the answer does not depend on it)", AUTO,
