@@ -571,11 +571,16 @@ def _open_intervals(poly: np.ndarray, x_edge: float, tol: float) -> np.ndarray:
     return ys.reshape(-1, 2)
 
 
+def _outline_tol(outline) -> float:
+    """Length below which two coordinates of an outline count as equal."""
+    return _REL_TOL * max(float(np.ptp(outline, axis=0).max()), 1e-300)
+
+
 def open_edges(outline, x_min, x_max) -> tuple[np.ndarray, np.ndarray]:
     """Which edges of an outline (edge k from vertex k to k + 1) are the inlet
     (on ``x = x_min``) and which the outlet (on ``x = x_max``): two boolean masks."""
     outline = np.asarray(outline, dtype=float)
-    tol = _REL_TOL * max(float(np.ptp(outline, axis=0).max()), 1e-300)
+    tol = _outline_tol(outline)
     a, b = _edges(outline)
 
     def on(x):
@@ -584,7 +589,7 @@ def open_edges(outline, x_min, x_max) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _wall_data(outline, obstacles, x_min, x_max) -> _WallData:
-    tol = _REL_TOL * max(float(np.ptp(outline, axis=0).max()), 1e-300)
+    tol = _outline_tol(outline)
     a, b = _edges(outline)
     inlet_edge, outlet_edge = open_edges(outline, x_min, x_max)
     open_edge = inlet_edge | outlet_edge
