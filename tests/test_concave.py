@@ -291,3 +291,37 @@ def test_fast_body_driven_through_a_thin_one_is_caught():
     sim.step(int(0.3 / sim.dt))
     assert sim.batch.bad.to_numpy()[0] == 0
     assert sim.state()["x"][0, 1, 1] < 5.0 - 0.05 - 0.25 + 0.01
+
+
+# An arch of a body: a bar 1.4 wide and 1 high with a slot 0.6 wide and 0.55 deep
+# cut up from the middle of its base, standing on two feet 0.4 wide.
+ARCH_OUTLINE = [[0.0, 0.0], [0.4, 0.0], [0.4, 0.55], [1.0, 0.55], [1.0, 0.0], [1.4, 0.0],
+                [1.4, 1.0], [0.0, 1.0]]
+
+
+@pytest.mark.parametrize("outline, places", [
+    ([[0.0, 0.0], [1.4, 0.0], [1.4, 0.45], [0.0, 0.45]], 1),   # a bar: one place
+    (ARCH_OUTLINE, 2),                                          # its two feet
+    # the same, its outline (and so its node numbers) starting in the middle of
+    # its left foot: that foot's nodes are the first and the last ones, one place
+    ([[0.2, 0.0]] + ARCH_OUTLINE[1:] + [[0.0, 0.0]], 2),
+])
+def test_each_place_of_wall_contact_is_one_contact(outline, places):
+    # Resting on the floor under its weight W, a body sinks in by delta, the same
+    # at every node on the floor (the floor's level set is linear in y). The paper
+    # divides each contact's resultant by its nodes in contact, so each place
+    # of contact pushes with kn delta: one place balances W at delta = W / kn,
+    # two at W / (2 kn). (Divided once over all its wall nodes, the arch would sink
+    # to W / kn on its feet as the bar does.)
+    species = {"shape": "polygon", "vertices": outline, "count": 1}
+    shape = sh.polygon(outline)
+    corner = np.array([9.0, 0.002])            # vertex 0 just above the floor
+    x0 = corner - shape.vertices[0]
+    sim, f, tau, load = settle([species], [(*x0, 0.0)], [0.0, -1.0])
+    assert_at_rest_in_balance(sim, f, tau, load)
+    st = sim.state()
+    assert abs(st["theta"][0, 0]) < 1e-6       # symmetric: it sinks in level
+    delta = -(st["x"][0, 0, 1] + shape.vertices[0][1])
+    weight = -load[0, 1]
+    kn = 1.0e4
+    assert delta == pytest.approx(weight / (places * kn), rel=1e-3)

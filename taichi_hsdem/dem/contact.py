@@ -26,6 +26,13 @@ With ``normalize`` (the paper's choice) the resultant force and moment of one
 direction of one contact are divided by its number of nodes in contact. When both
 directions see a contact (two disks, two faces) the pair's resultant is their
 mean; a corner driven into a face is seen by one direction only and counts alone.
+Against the walls each place of contact (a run of consecutive surface nodes along
+the outline) is one contact: a body touching them in two places, as an arch of a
+body on its two feet or a body in a corner, gets each resultant divided by its own
+count. Between two bodies all the nodes of one direction still count as one
+contact, wherever they touch (two interlocked concave bodies touching in two
+places get one count; which places of the two directions are the same contact is
+not worked out).
 
 Disks (every particle a circle) take the analytic path: one contact point per
 pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
@@ -51,6 +58,70 @@ def contact_law(depth, n, u, fs_old, kn, ks, mu, gamma, dt):
     if fsn > cap:
         fs *= cap / fsn
     return fn, fs
+
+
+# Places of contact along a body's outline. Its surface nodes are numbered along
+# the outline, so the nodes of one place of contact are a run of consecutive
+# numbers (the last node's neighbour being node 0). The paper divides the
+# resultant of a contact by its number of nodes in contact: a body touching the
+# walls in several places (a corner of the channel; an L standing on both its
+# feet) has several contacts, each divided by its own count. _place_step folds
+# one node into the accumulator, _place_total closes it; a single place gives
+# the plain sum over the nodes (the caller divides that, for the same bits).
+# Accumulator: the open run's force and moment and count (0-3), the first run's
+# when it starts at node 0 (4-7; it may join the last run), the closed runs'
+# normalized sums (8-10), the count of places (11).
+_OPEN, _FIRST, _SUM, _PLACES = 0, 4, 8, 11
+
+
+@ti.func
+def _no_places():
+    return ti.Vector([0.0] * 12)
+
+
+@ti.func
+def _place_step(acc, k, hit, fm):
+    out = acc
+    if hit:
+        for c in ti.static(range(3)):
+            out[_OPEN + c] += fm[c]
+        out[_OPEN + 3] += 1.0
+    elif acc[_OPEN + 3] > 0:  # the run before node k ends
+        if k - acc[_OPEN + 3] == 0:  # it started at node 0: keep it for the wrap
+            for c in ti.static(range(4)):
+                out[_FIRST + c] = acc[_OPEN + c]
+        else:
+            for c in ti.static(range(3)):
+                out[_SUM + c] += acc[_OPEN + c] / acc[_OPEN + 3]
+        for c in ti.static(range(4)):
+            out[_OPEN + c] = 0.0
+        out[_PLACES] += 1.0
+    return out
+
+
+@ti.func
+def _place_total(acc, n_nodes):
+    """(sum over places of their resultant over their node count, number of places)."""
+    total = ti.Vector([acc[_SUM], acc[_SUM + 1], acc[_SUM + 2]])
+    places = acc[_PLACES]
+    run = acc[_OPEN + 3]
+    first = acc[_FIRST + 3]
+    if run > 0 and run >= n_nodes:  # every node in contact: one place
+        places += 1.0
+        for c in ti.static(range(3)):
+            total[c] += acc[_OPEN + c] / run
+    elif run > 0 and first > 0:  # the last run goes on into the first one
+        for c in ti.static(range(3)):
+            total[c] += (acc[_FIRST + c] + acc[_OPEN + c]) / (first + run)
+    else:
+        if run > 0:
+            places += 1.0
+            for c in ti.static(range(3)):
+                total[c] += acc[_OPEN + c] / run
+        if first > 0:
+            for c in ti.static(range(3)):
+                total[c] += acc[_FIRST + c] / first
+    return total, ti.cast(places, ti.i32)
 
 
 @ti.func
@@ -206,9 +277,12 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
         fw = vec2(0.0, 0.0)
         mw = 0.0
         nw = 0
+        places = _no_places()
         for k in range(nn_i):
             p = node_world(node_pos, noff_i + k, xi, ci, si)
             phi, g = wall_sample(wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h, p)
+            hit = False
+            fm = ti.Vector([0.0, 0.0, 0.0])
             if phi < 0.0 and g.norm() > 0.0:
                 nrm = g.normalized()
                 u = vi + spin(wi, p - xi)
@@ -219,9 +293,17 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                 mw += cross(p - xi, fn + fs)
                 nw += 1
                 deepest = ti.max(deepest, -phi / deq[i])
+                hit = True
+                fm = ti.Vector([fn[0] + fs[0], fn[1] + fs[1], cross(p - xi, fn + fs)])
+            places = _place_step(places, k, hit, fm)
         if normalize != 0 and nw > 0:
-            fw /= nw
-            mw /= nw
+            total, count = _place_total(places, nn_i)
+            if count > 1:   # touching the walls in several places: each its own contact
+                fw = vec2(total[0], total[1])
+                mw = total[2]
+            else:
+                fw /= nw
+                mw /= nw
         f[r, i] += ftot + fw
         tau[r, i] += mtot + mw
         ti.atomic_max(max_overlap[r], deepest)
