@@ -100,17 +100,14 @@ def _place_step(acc, k, hit, fm):
 
 
 @ti.func
-def _place_total(acc, n_nodes):
-    """(sum over places of their resultant over their node count, number of places)."""
+def _place_total(acc):
+    """(sum over places of their resultant over their node count, number of places).
+    With every node in contact no run was closed: the open run is the one place."""
     total = ti.Vector([acc[_SUM], acc[_SUM + 1], acc[_SUM + 2]])
     places = acc[_PLACES]
     run = acc[_OPEN + 3]
     first = acc[_FIRST + 3]
-    if run > 0 and run >= n_nodes:  # every node in contact: one place
-        places += 1.0
-        for c in ti.static(range(3)):
-            total[c] += acc[_OPEN + c] / run
-    elif run > 0 and first > 0:  # the last run goes on into the first one
+    if run > 0 and first > 0:  # the last run goes on into the first one
         for c in ti.static(range(3)):
             total[c] += (acc[_FIRST + c] + acc[_OPEN + c]) / (first + run)
     else:
@@ -289,15 +286,17 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
                 fs_old = find_shear(hp_old, hs_old, r, i, k, slots, n_part)
                 fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
                 store_shear(hp_new, hs_new, r, i, k, slots, n_part, fs, flags)
-                fw += fn + fs
-                mw += cross(p - xi, fn + fs)
+                fc = fn + fs
+                mc = cross(p - xi, fc)
+                fw += fc
+                mw += mc
                 nw += 1
                 deepest = ti.max(deepest, -phi / deq[i])
                 hit = True
-                fm = ti.Vector([fn[0] + fs[0], fn[1] + fs[1], cross(p - xi, fn + fs)])
+                fm = ti.Vector([fc[0], fc[1], mc])
             places = _place_step(places, k, hit, fm)
         if normalize != 0 and nw > 0:
-            total, count = _place_total(places, nn_i)
+            total, count = _place_total(places)
             if count > 1:   # touching the walls in several places: each its own contact
                 fw = vec2(total[0], total[1])
                 mw = total[2]
