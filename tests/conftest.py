@@ -5,6 +5,12 @@ takes one precision per process) and then only the tests marked
 ``both_precisions``: their tolerances follow from :func:`unit_roundoff` where
 f32's round-off matters. ``tests/test_precision.py`` runs that in a subprocess of
 the default (f64) run.
+
+``python -m pytest --arch gpu`` runs the same tests on the GPU backend (CUDA):
+every simulation a test builds runs there whatever its scene's ``run.arch``, and
+the run stops at once, with a message, where Taichi finds no GPU with float64
+kernels. Tests that check the CPU's own paths (the fused disk stepper, ``x64`` in
+a summary) are expected to fail there; the rest hold the same tolerances.
 """
 import copy
 from collections import namedtuple
@@ -15,17 +21,21 @@ import pytest
 from taichi_hsdem import backend
 
 both_precisions = pytest.mark.both_precisions
-_PRECISION = {"value": "f64"}
+_PRECISION = {"value": "f64", "arch": "cpu"}
 
 
 def pytest_addoption(parser):
     parser.addoption("--precision", choices=("f64", "f32"), default="f64",
                      help="floating-point type of the kernels for this run; f32 runs only "
                           "the tests marked both_precisions")
+    parser.addoption("--arch", choices=("cpu", "gpu"), default="cpu",
+                     help="Taichi backend of this run (gpu: every simulation of the tests on "
+                          "the GPU, whatever its scene's run.arch)")
 
 
 def pytest_configure(config):
     _PRECISION["value"] = config.getoption("--precision")
+    _PRECISION["arch"] = config.getoption("--arch")
 
 
 def pytest_collection_modifyitems(config, items):
@@ -53,9 +63,22 @@ def ulp(x: float) -> float:
 
 
 @pytest.fixture(scope="session", autouse=True)
-def _taichi_cpu():
-    # One backend per process: every test runs on the CPU, in the precision asked.
-    backend.init("cpu", precision())
+def _taichi_backend():
+    # One backend per process: every test runs on the CPU (or, with --arch gpu, on
+    # the GPU), in the precision asked.
+    if _PRECISION["arch"] == "cpu":
+        backend.init("cpu", precision())
+        yield
+        return
+    try:
+        backend.init("gpu", precision())
+    except backend.BackendError as exc:
+        pytest.exit(f"--arch gpu: {exc}", returncode=2)
+    init = backend.init
+    # a scene's run.arch ("cpu" by default) would otherwise refuse the GPU backend
+    backend.init = lambda arch="cpu", precision="f64": init("gpu", precision)
+    yield
+    backend.init = init
 
 
 def arena_scene(particles, *, kn=1.0e4, friction=0.0, restitution=1.0, xi=0.0, length=20.0,
