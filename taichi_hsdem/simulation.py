@@ -247,9 +247,10 @@ class Simulation:
         stop early and catch up once the host has grown the capacities."""
         self._fused_launch(n)
         batch = self.batch
-        running = batch.running.to_numpy()
-        remaining = np.where((running != 0) & (batch.bad.to_numpy() == 0),
-                             n - self.done.to_numpy(), 0)
+        done = self.done.to_numpy()      # -1: went bad or not running (fused.disk_steps)
+        remaining = np.where(done >= 0, n - done, 0)
+        if remaining.any():
+            running = batch.running.to_numpy()
         while remaining.any():
             self.rebuild_neighbors()                  # grows what overflowed
             lag = remaining > 0
@@ -259,8 +260,8 @@ class Simulation:
                 self._fused_launch(k)
             finally:
                 batch.running.from_numpy(running)
-            remaining = np.where(lag & (batch.bad.to_numpy() == 0),
-                                 remaining - self.done.to_numpy(), 0)
+            done = self.done.to_numpy()
+            remaining = np.where(lag & (done >= 0), remaining - done, 0)
 
     def _fused_launch(self, k: int):
         m = self.model

@@ -81,8 +81,9 @@ def disk_steps(n_steps: ti.i32, x: ti.types.ndarray(), th: ti.types.ndarray(),
                builds: ti.types.ndarray(), dt: float, x_escape: float):
     """Advance every running realization by up to ``n_steps`` steps.
 
-    ``done[r]``: the steps realization ``r`` took (``n_steps`` unless it went bad
-    or a neighbour rebuild overflowed). ``builds[r]`` counts its rebuilds. The
+    ``done[r]``: the steps realization ``r`` took (``n_steps`` unless a neighbour
+    rebuild overflowed), or -1 if it went bad or was not running: all the host
+    reads after a launch. ``builds[r]`` counts its rebuilds. The
     latest shear history ends in buffer ``a`` when ``n_steps`` is even, else ``b``,
     for every realization (one that stopped early, or did not run, is copied
     there), so that the host swaps the two buffers of the whole batch.
@@ -124,7 +125,7 @@ def disk_steps(n_steps: ti.i32, x: ti.types.ndarray(), th: ti.types.ndarray(),
                         if list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n,
                                     g_ox, g_oy, cs, skin, ncx, ncy, flags, r, i) > nbr.shape[2]:
                             stop = 1
-            done[r] = s
+            done[r] = s if stop == 0 or (bad[r] == 0 and running[r] != 0) else -1
             max_overlap[r] = deepest
             if s % 2 != n_steps % 2:
                 # the latest history is in the other buffer: copy it where the host looks
