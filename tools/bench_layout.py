@@ -58,17 +58,24 @@ def main():
     mg = ti.ndarray(ti.f64, (2, n))
     mg.from_numpy(np.stack([x, b]))
 
+    segs = (ny + SEGMENT - 1) // SEGMENT   # work items per column
+
+    @ti.func
+    def red_run(t, colour):
+        """First index and count of the cells of one colour in work item t: a
+        segment of SEGMENT cells of one column, every second one."""
+        i, seg = t // segs, t % segs
+        j0, j1 = seg * SEGMENT, ti.min((seg + 1) * SEGMENT, ny)
+        first = j0 + (i + colour + j0) % 2
+        return (i + 1) * s + first, (j1 - first + 1) // 2
+
     @ti.kernel
     def strided(op: ti.types.ndarray(dtype=vec2, ndim=1), mg: ti.types.ndarray(ndim=2),
                 colour: ti.i32):
-        segs = (ny + SEGMENT - 1) // SEGMENT
         for t in range(nx * segs):
-            i, seg = t // segs, t % segs
-            j0, j1 = seg * SEGMENT, ti.min((seg + 1) * SEGMENT, ny)
-            k0 = (i + 1) * s
-            first = j0 + (i + colour + j0) % 2
-            for h in range((j1 - first + 1) // 2):
-                k = k0 + first + 2 * h
+            k0, count = red_run(t, colour)
+            for h in range(count):
+                k = k0 + 2 * h
                 d = op[k][0] + op[k][1] + op[k - s][0] + op[k - 1][1]
                 v = mg[1, k] + (op[k - s][0] * mg[0, k - s] + op[k][0] * mg[0, k + s]
                                 + op[k - 1][1] * mg[0, k - 1] + op[k][1] * mg[0, k + 1])
@@ -83,14 +90,10 @@ def main():
 
     @ti.kernel
     def separate(tx: A1, ty: A1, x: A1, b: A1, colour: ti.i32):
-        segs = (ny + SEGMENT - 1) // SEGMENT
         for t in range(nx * segs):
-            i, seg = t // segs, t % segs
-            j0, j1 = seg * SEGMENT, ti.min((seg + 1) * SEGMENT, ny)
-            k0 = (i + 1) * s
-            first = j0 + (i + colour + j0) % 2
-            for h in range((j1 - first + 1) // 2):
-                k = k0 + first + 2 * h
+            k0, count = red_run(t, colour)
+            for h in range(count):
+                k = k0 + 2 * h
                 d = tx[k] + ty[k] + tx[k - s] + ty[k - 1]
                 v = b[k] + (tx[k - s] * x[k - s] + tx[k] * x[k + s]
                             + ty[k - 1] * x[k - 1] + ty[k] * x[k + 1])
