@@ -313,12 +313,7 @@ class Simulation:
             self.history_overflows += lost
             self.flags[F_HISTORY_OVERFLOW] = 0
         batch = self.batch
-        running = batch.running.to_numpy()
-        escaped = batch.escaped.to_numpy().astype(np.int64)
-        bad = batch.bad.to_numpy()
-        overlap = batch.max_overlap.to_numpy().astype(float)
-        if not final:
-            batch.max_overlap.fill(0)
+        running, escaped, bad, overlap = integrate.read_status(batch, not final)
         st = None
         changed = False
         for r in range(self.R):

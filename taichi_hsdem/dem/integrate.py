@@ -12,6 +12,8 @@ a body that has moved half the Verlet skin since the last neighbour build (asks
 for a rebuild). It also counts bodies crossing the escape line and parks them.
 """
 
+import numpy as np
+
 from ..backend import ti  # sets the environment before Taichi loads
 from .layout import BAD_FAST, BAD_NAN, F_REBUILD
 
@@ -73,3 +75,32 @@ def advance(bodies, batch, particles, materials, neighbors, flags, dt: float, sk
                    b.alive, batch.running, batch.bad, batch.escaped, p.species, p.mass,
                    p.inertia, p.d_eq, materials.xi, neighbors.x_ref, flags, dt, skin,
                    x_escape)
+
+
+@ti.kernel
+def _status_kernel(running: ti.types.ndarray(), escaped: ti.types.ndarray(),
+                   bad: ti.types.ndarray(), max_overlap: ti.types.ndarray(),
+                   out: ti.types.ndarray(), reset: ti.i32):
+    for r in range(running.shape[0]):
+        out[0, r] = running[r]
+        out[1, r] = escaped[r]
+        out[2, r] = bad[r]
+        out[3, r] = max_overlap[r]
+        if reset != 0:
+            max_overlap[r] = 0.0
+
+
+def read_status(batch, reset_overlap: bool):
+    """``(running, escaped, bad, max_overlap)`` of every realization, read in one
+    transfer (each read of a device array costs a kernel launch and more,
+    about 0.1 ms on the CPU); with ``reset_overlap`` the deepest overlap starts
+    again from 0. The integers travel in the kernels' float type: exact below
+    2^24, far above any escapee count or the ``BAD_*`` bits."""
+    R = batch.running.shape[0]
+    if batch.status is None or batch.status.shape != (4, R):
+        batch.status = ti.ndarray(batch.max_overlap.dtype, shape=(4, R))
+    _status_kernel(batch.running, batch.escaped, batch.bad, batch.max_overlap, batch.status,
+                   int(bool(reset_overlap)))
+    a = batch.status.to_numpy()
+    return (a[0].astype(np.int32), a[1].astype(np.int64), a[2].astype(np.int32),
+            a[3].astype(float))

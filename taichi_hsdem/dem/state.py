@@ -87,11 +87,13 @@ class Bodies:
 class Batch:
     """Per realization, ``(R,)``: ``running`` (1 while it runs), ``escaped`` (bodies
     past the escape line), ``bad`` (``layout.BAD_*`` bits), ``max_overlap``
-    (deepest overlap since the last check, fraction of d_eq)."""
+    (deepest overlap since the last check, fraction of d_eq); ``status``: where
+    ``integrate.read_status`` gathers them for the host."""
     running: object
     escaped: object
     bad: object
     max_overlap: object
+    status: object = None
 
     @classmethod
     def start(cls, R: int) -> "Batch":
