@@ -125,7 +125,7 @@ def disk_steps(n_steps: ti.i32, x: ti.types.ndarray(), th: ti.types.ndarray(),
                         if list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n,
                                     g_ox, g_oy, cs, skin, ncx, ncy, flags, r, i) > nbr.shape[2]:
                             stop = 1
-            done[r] = s if stop == 0 or (bad[r] == 0 and running[r] != 0) else -1
+            done[r] = -1 if bad[r] != 0 or running[r] == 0 else s
             max_overlap[r] = deepest
             if s % 2 != n_steps % 2:
                 # the latest history is in the other buffer: copy it where the host looks

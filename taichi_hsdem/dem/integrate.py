@@ -96,9 +96,6 @@ def read_status(batch, reset_overlap: bool):
     about 0.1 ms on the CPU); with ``reset_overlap`` the deepest overlap starts
     again from 0. The integers travel in the kernels' float type: exact below
     2^24, far above any escapee count or the ``BAD_*`` bits."""
-    R = batch.running.shape[0]
-    if batch.status is None or batch.status.shape != (4, R):
-        batch.status = ti.ndarray(batch.max_overlap.dtype, shape=(4, R))
     _status_kernel(batch.running, batch.escaped, batch.bad, batch.max_overlap, batch.status,
                    int(bool(reset_overlap)))
     a = batch.status.to_numpy()

@@ -93,12 +93,13 @@ class Batch:
     escaped: object
     bad: object
     max_overlap: object
-    status: object = None
+    status: object
 
     @classmethod
     def start(cls, R: int) -> "Batch":
         return cls(running=array(np.ones(R, dtype=np.int32), ti.i32),
-                   escaped=_zeros(R, ti.i32), bad=_zeros(R, ti.i32), max_overlap=_zeros(R))
+                   escaped=_zeros(R, ti.i32), bad=_zeros(R, ti.i32), max_overlap=_zeros(R),
+                   status=_zeros((4, R)))
 
 
 @dataclass
