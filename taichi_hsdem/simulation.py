@@ -479,8 +479,7 @@ class Simulation:
                 if on_frame is not None:
                     on_frame(self)
             if self.t >= self.next_series - 0.5 * self.dt:
-                run_np = self.batch.running.to_numpy()
-                esc = self.batch.escaped.to_numpy()
+                run_np, esc, _, _ = integrate.read_status(self.batch, False)
                 for r in range(self.R):
                     if run_np[r]:
                         self.series.append((r, self.t, int(esc[r])))
