@@ -1,4 +1,4 @@
-"""Closed-form material laws of the model (MODEL.md sections 1-2), plain numpy.
+"""Closed-form material laws of the model (docs/model.md sections 1-2), plain numpy.
 
 * :func:`restitution_factor`: the dashpot factor ``c_e`` of a restitution ``e``,
   ``gamma_n = c_e sqrt(k_n m_eff)``.
@@ -120,6 +120,6 @@ def kozeny_carman(sphericity, diameter, area, gap):
 
 
 def theory_escapees(phi, t, flow_rate, gap, diameter):
-    """Escapees of a steady stream, ``4 phi Q t / (H pi d^2)`` (MODEL.md sec. 4)."""
+    """Escapees of a steady stream, ``4 phi Q t / (H pi d^2)`` (docs/model.md sec. 4)."""
     return 4.0 * np.asarray(phi, dtype=float) * flow_rate * np.asarray(t, dtype=float) / (
         gap * math.pi * diameter ** 2)

@@ -1,4 +1,4 @@
-"""Pressure solve (taichi_hsdem.fluid) against exact answers (MODEL.md sections 2, 6)."""
+"""Pressure solve (taichi_hsdem.fluid) against exact answers (docs/model.md sections 2, 6)."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Particle mechanics against exact answers (MODEL.md sections 1 and 6)."""
+"""Particle mechanics against exact answers (docs/model.md sections 1 and 6)."""
 import math
 
 import numpy as np

@@ -1,7 +1,7 @@
 """Grid convergence of the pressure solve on the circular-inclusion problem.
 
 A disk of radius ``a`` and permeability ``k2`` in a background ``k1`` under a
-far-field gradient (MODEL.md section 6), in the box ``[-4a, 4a]^2`` with the exact
+far-field gradient (docs/model.md section 6), in the box ``[-4a, 4a]^2`` with the exact
 pressure on its sides; cells belong to the disk if their centre does. For each
 contrast ``k2/k1`` and each resolution ``a/dx`` the table gives the mean (L1) and
 largest (L_inf) error of the cell pressures in units of ``G a``, the observed order

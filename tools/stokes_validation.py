@@ -19,7 +19,7 @@ reported beside it (``rel_to_drop``). The Hele-Shaw field is recomputed from the
 kept positions with :class:`taichi_hsdem.fluid.PressureSolver` for each
 permeability model:
 
-* ``kozeny_carman`` (shipped, MODEL.md): cells whose centre lies in a disk take
+* ``kozeny_carman`` (shipped, docs/model.md): cells whose centre lies in a disk take
   Kozeny-Carman, the others ``H^2 / 12``;
 * ``gap_h3``: the gap ``h = H - 2 sqrt(r^2 - rho^2)`` left in the column at the
   cell centre, as one film: ``kappa = h^3 / (12 H)`` (depth-integrated conductance

@@ -1,4 +1,4 @@
-"""Contact forces (MODEL.md section 1): the LS-DEM node law and the disk fast path.
+"""Contact forces (docs/model.md section 1): the LS-DEM node law and the disk fast path.
 
 For particle ``i`` against ``j`` every surface node ``p`` of ``i`` is mapped into
 ``j``'s body frame and ``phi_j(p)`` is bilinearly interpolated on ``j``'s level-set

@@ -1,4 +1,4 @@
-"""Explicit integration with global damping (MODEL.md section 1).
+"""Explicit integration with global damping (docs/model.md section 1).
 
     v     <- [(1 - xi dt/2) v     + dt F/m] / (1 + xi dt/2)
     omega <- [(1 - xi dt/2) omega + dt M/I] / (1 + xi dt/2)

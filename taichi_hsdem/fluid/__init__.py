@@ -1,4 +1,4 @@
-"""The Hele-Shaw pressure solve on the fixed fluid grid (MODEL.md section 2):
+"""The Hele-Shaw pressure solve on the fixed fluid grid (docs/model.md section 2):
 the finite-volume system (:mod:`.system`), the pyamg multigrid solve
 (:mod:`.solver`, worker processes in :mod:`.pool`), the Taichi geometric-multigrid
 CG that is the default where Taichi has float64 (:mod:`.gmg`, with the kernels of

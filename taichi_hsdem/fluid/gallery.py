@@ -1,5 +1,5 @@
 """Exact solutions of the pressure equation, for tests and convergence studies
-(like pyamg's ``gallery``): MODEL.md section 6."""
+(like pyamg's ``gallery``): docs/model.md section 6."""
 from __future__ import annotations
 
 import time
@@ -12,7 +12,7 @@ from .solver import PressureSolver
 def circular_inclusion_pressure(x, y, radius, k_out, k_in, gradient=1.0):
     """Exact pressure round a circular inclusion in a uniform far-field gradient.
 
-    MODEL.md section 6: with ``beta = (k_out - k_in) / (k_out + k_in)``,
+    docs/model.md section 6: with ``beta = (k_out - k_in) / (k_out + k_in)``,
     ``p = -G x (1 + beta a^2 / r^2)`` outside and ``p = -G x 2 k_out / (k_out +
     k_in)`` inside (``r < a``), the inclusion centred at the origin.
 
