@@ -67,6 +67,33 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
     # 8 ms instead of 3 us): one BLAS thread, limited at run time because numpy
     # may have loaded before the environment variables could act.
     _STATE["blas_limit"] = threadpool_limits(limits=1, user_api="blas")
+    used = _ti_init(target, fp)
+    why = None
+    if arch == "auto" and used in _NO_F64 and precision == "f64":
+        # e.g. Mesa's software Vulkan when no CUDA device exists: auto means "the
+        # fastest backend that runs this scene", so the CPU
+        why = f"{used} has no f64 kernels here: the CPU"
+        ti.reset()
+        used = _ti_init(ti.cpu, fp)
+    if arch == "gpu" and used in ("x64", "arm64"):
+        raise BackendError("arch=gpu was requested but Taichi found no usable GPU "
+                           "(CUDA, Vulkan or Metal); use --arch cpu or --arch auto")
+    if used in _NO_F64 and precision == "f64":
+        # e.g. Mesa's software Vulkan when no CUDA device exists: the level-set
+        # kernels' f64 trigonometry does not compile there.
+        raise BackendError(f"the GPU backend found is {used}, which has no f64 kernels here; "
+                           f"use --arch cpu, or --set run.precision=\"f32\"")
+    _STATE.update(request=(arch, precision), arch_request=arch, arch=used,
+                  precision=precision, real=fp, why=why)
+    return used
+
+
+#: Backends whose kernels have no float64 trigonometry here.
+_NO_F64 = ("vulkan", "metal", "opengl", "gles")
+
+
+def _ti_init(target, fp) -> str:
+    """``ti.init`` with the project's settings; the arch's name."""
     # Taichi prints "Starting on arch=..." on stdout; stdout belongs to the user.
     with contextlib.redirect_stdout(io.StringIO()):
         # fast_math=False: LLVM may not reorder floating-point arithmetic, so the
@@ -76,18 +103,12 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
         threads = {} if thread_share() is None else {"cpu_max_num_threads": thread_share()}
         ti.init(arch=target, default_fp=fp, default_ip=ti.i32, log_level=ti.ERROR,
                 offline_cache=True, fast_math=False, **threads)
-    used = ti.lang.impl.current_cfg().arch.name
-    if arch == "gpu" and used in ("x64", "arm64"):
-        raise BackendError("arch=gpu was requested but Taichi found no usable GPU "
-                           "(CUDA, Vulkan or Metal); use --arch cpu or --arch auto")
-    if used in ("vulkan", "metal", "opengl", "gles") and precision == "f64":
-        # e.g. Mesa's software Vulkan when no CUDA device exists: the level-set
-        # kernels' f64 trigonometry does not compile there.
-        raise BackendError(f"the GPU backend found is {used}, which has no f64 kernels here; "
-                           f"use --arch cpu, or --set run.precision=\"f32\"")
-    _STATE.update(request=(arch, precision), arch_request=arch, arch=used,
-                  precision=precision, real=fp)
-    return used
+    return ti.lang.impl.current_cfg().arch.name
+
+
+def auto_reason() -> str | None:
+    """Why ``arch = "auto"`` did not take the GPU it found, or None."""
+    return _STATE.get("why")
 
 
 def real():

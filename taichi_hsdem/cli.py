@@ -4,19 +4,19 @@
 Exit status: 0 success; 2 the scene, the arguments or the output folder are
 invalid (one line per problem, no traceback, nothing written); 1 the run failed
 (numerical instability, a fluid solve that did not balance, results that could
-not be written), with what to change; 130 interrupted (Ctrl-C), with one line
-saying what was kept.
+not be written), with what to change; 130 interrupted (Ctrl-C, at any moment),
+with one line saying what was kept.
 
-A folder never mixes two runs: nothing in it changes until the run ends, then
-the results are written together (each file through a temporary one), summary
-last, and result files of an earlier run that this one does not write are
-removed. An interrupted run writes its results marked ``"status":
-"interrupted"`` with the time reached, and a checkpoint.
+The output folder's rules (:mod:`taichi_hsdem.output`): files of the user's are
+never replaced or removed, a folder never mixes two runs, and a failed run leaves
+the earlier result as it was. An interrupted run writes its results marked
+``"status": "interrupted"`` with the time reached, and a checkpoint.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -95,20 +95,30 @@ class _Progress:
 
 
 class _Interrupt:
-    """Ctrl-C during the run: the first asks the run to stop at the next chunk of
-    steps (results and a checkpoint are kept), a second one stops at once."""
+    """Ctrl-C (SIGINT), handled from the first line of :func:`main` to its last.
+
+    During set-up it stops at once (nothing has been written yet); during the run
+    the first asks the run to stop at the next chunk of steps (results and a
+    checkpoint are kept) and a second stops at once; while the results are being
+    written it waits until they all are, so that a folder never holds part of a
+    run's files. The handler is installed explicitly, so that a run started with
+    SIGINT ignored (a background job of a script) still obeys it."""
+
+    SETUP, RUN, WRITE = "set-up", "run", "write"
 
     def __init__(self):
         self.requested = False
+        self.phase = self.SETUP
         self.previous = None
 
+    def _handler(self, signum, frame):
+        if self.phase == self.SETUP or (self.phase == self.RUN and self.requested):
+            raise KeyboardInterrupt
+        self.requested = True
+
     def __enter__(self):
-        def handler(signum, frame):
-            if self.requested:
-                raise KeyboardInterrupt
-            self.requested = True
         try:
-            self.previous = signal.signal(signal.SIGINT, handler)
+            self.previous = signal.signal(signal.SIGINT, self._handler)
         except ValueError:          # not the main thread: Ctrl-C stays as it is
             self.previous = None
         return self
@@ -144,27 +154,39 @@ def _overrides(args) -> list[str]:
 def output_folder_problem(out: Path, key: str) -> str | None:
     """Why results cannot be written to folder ``out`` (``key`` names where it came
     from: ``--out`` or ``FILE: output.dir``), or None. Creates nothing."""
-    if out.exists() and not out.is_dir():
-        return f"{key}: {out} is a file, not a folder"
-    probe = out
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if not probe.is_dir():
-        return f"{key}: {out} lies under {probe}, which is a file"
-    if not os.access(probe, os.W_OK | os.X_OK):
-        return f"{key}: cannot write in {probe} (permission denied)"
+    too_long = [part for part in out.parts if len(os.fsencode(part)) > 255]
+    if too_long:
+        return f"{key}: the folder name {too_long[0][:40]}... is longer than 255 bytes"
     try:
+        if os.path.islink(out) and not out.exists():
+            return (f"{key}: {out} is a link to {os.readlink(out)}, which does not exist "
+                    "(or is a loop of links)")
+        if out.exists() and not out.is_dir():
+            return f"{key}: {out} is a file, not a folder"
+        probe = out
+        while not os.path.lexists(probe):
+            if probe.parent == probe:
+                break
+            probe = probe.parent
+        if not probe.is_dir():
+            return f"{key}: {out} lies under {probe}, which is not a folder"
+        if not os.access(probe, os.W_OK | os.X_OK):
+            return f"{key}: cannot write in {probe} (permission denied)"
         with tempfile.TemporaryFile(dir=probe):
             pass
     except OSError as exc:
-        return f"{key}: cannot write in {probe} ({exc.strerror or exc})"
+        return f"{key}: cannot write in {out} ({exc.strerror or exc})"
+    foreign = output.foreign_files(out)
+    if foreign:
+        return (f"{key}: {out} holds {', '.join(foreign)}, which no run of taichi_hsdem "
+                "wrote there and which a run would replace or remove: choose a new or "
+                "empty folder, or move them")
     return None
 
 
 def _load(args) -> tuple:
-    """The scene (and checkpoint path) the arguments ask for; SceneError otherwise."""
+    """The scene and the checkpoint the arguments ask for (None when not
+    resuming); SceneError otherwise."""
     if args.resume is None:
         if args.scene is None:
             raise SceneError("python -m taichi_hsdem: give a scene file, or --resume DIR")
@@ -184,39 +206,94 @@ def _load(args) -> tuple:
                    for k in RESUMABLE_KEYS):
             raise SceneError(f"--resume: --set {key}: only run.t_end and the output keys "
                              f"can change when a run is continued")
-    raw = parse_toml(header["scene"])
-    raw.setdefault("output", {})["dir"] = str(args.resume)
+    try:
+        raw = parse_toml(header["scene"])
+    except SceneError as exc:
+        raise SceneError(f"--resume: {path}: the scene inside is damaged "
+                         f"({exc.problems[0]})") from None
+    raw.setdefault("output", {})["dir"] = str(_home_of(Path(args.resume)))
     scene = load_scene(raw, sets)
     return scene, path
 
 
+def _home_of(folder: Path) -> Path:
+    """Where a run continued from ``folder`` publishes: the folder itself, or for
+    the staging folder of a run killed hard, the output folder it lies in."""
+    if folder.resolve().name.startswith(output.STAGING_PREFIX):
+        return folder.resolve().parent
+    return folder
+
+
+def _same_folder(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def main(argv=None) -> int:
-    try:
-        args = _parser().parse_args(argv)
-    except SystemExit as exc:          # --help (0) or a bad argument (2)
-        return exc.code
-    try:
-        return _main(args)
-    except KeyboardInterrupt:
-        print("interrupted before the run started: nothing was written", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    with _Interrupt() as interrupt:
+        try:
+            args = _parser().parse_args(argv)
+        except SystemExit as exc:          # --help (0) or a bad argument (2)
+            return exc.code
+        try:
+            return _main(args, interrupt)
+        except KeyboardInterrupt:
+            print("interrupted during set-up: nothing was written", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        except MemoryError:
+            print("out of memory: the scene needs more memory than this machine gave; "
+                  "use fewer realizations, particles, nodes or a coarser fluid.cell_size",
+                  file=sys.stderr)
+            return EXIT_FAILED
+        except Exception as exc:         # a defect of ours: one line, not a traceback
+            if os.environ.get("TAICHI_HSDEM_DEBUG"):
+                raise
+            print(f"internal error ({type(exc).__name__}: {exc}); this is a bug of "
+                  "taichi_hsdem: please report it with the command (set "
+                  "TAICHI_HSDEM_DEBUG=1 for the traceback)", file=sys.stderr)
+            return EXIT_FAILED
 
 
-def _main(args) -> int:
+def _main(args, interrupt) -> int:
     try:
         scene, resume_from = _load(args)
     except SceneError as exc:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID
+    if args.out is not None and not args.out.strip():
+        print("--out: the folder name is empty", file=sys.stderr)
+        return EXIT_INVALID
     out = Path(args.out) if args.out else Path(scene.output.dir)
     where = "--out" if args.out else ("--resume" if resume_from else
                                       f"{scene.source}: output.dir")
+    resume_dir = None if resume_from is None else resume_from.parent
+    continuing = resume_dir is not None and _same_folder(out, resume_dir)
     problem = output_folder_problem(out, where)
     if problem:
         print(problem, file=sys.stderr)
         return EXIT_INVALID
+    try:
+        with output.Staging(out, continuing=continuing) as staged:
+            code = _run(args, scene, resume_from, staged, interrupt)
+    except output.FolderInUse as exc:
+        print(f"{where}: {exc}: wait for it to end, or choose another folder",
+              file=sys.stderr)
+        return EXIT_INVALID
+    if (code in (EXIT_OK, EXIT_INTERRUPTED) and resume_dir is not None and not continuing
+            and resume_dir.resolve().name.startswith(output.STAGING_PREFIX)):
+        # the staging folder of a run killed hard, now published: it is done
+        shutil.rmtree(resume_dir, ignore_errors=True)
+    return code
+
+
+def _run(args, scene, resume_from, staged, interrupt) -> int:
+    """Build, run and publish into ``staged``; the exit status."""
+    out = staged.out
     # The simulator loads Taichi (about a second): only once the scene is valid.
+    from . import backend
     from .runner import UNSTABLE_HINT, RunFailed, build, execute
     try:
         sim = build(scene, place_particles=resume_from is None)
@@ -230,56 +307,77 @@ def _main(args) -> int:
         print(f"--resume: {exc}", file=sys.stderr)
         return EXIT_INVALID
     sc = sim.scene
+    why = backend.auto_reason()
     _say(args.quiet, f"{sc.name}: {sim.R} realization(s) x {sim.N} particles, "
          f"dt = {sim.dt:.3g} s, "
          f"{sim.model.species[0].shape.name if len(sim.model.species) == 1 else 'mixed'} "
          f"({'disk' if sim.model.all_disks else 'level-set'} contacts), arch {sim.arch}"
+         + (f" ({why})" if why else "")
          + (f", resumed at t = {sim.t:.4g} s" if resume_from else "") + f" -> {out}")
-    with output.Staging(out) as staged:
-        pictures = output.Pictures(sim, staged, view=args.view, quiet=args.quiet,
-                                   resumed=resume_from is not None)
-        progress = _Progress(args.quiet, sim.t, sc.run.t_end)
-        saver = output.CheckpointClock(sim, staged, sc.output.checkpoint_every)
-        with _Interrupt() as interrupt:
-            try:
-                result = execute(sim, progress=progress, on_frame=pictures.on_frame,
-                                 frame_times=pictures.frame_times, stop=interrupt,
-                                 on_chunk=saver)
-            except RunFailed as exc:
-                progress.close()
-                pictures.discard()
-                for line in exc.lines:
-                    print(f"run failed: {line}", file=sys.stderr)
-                return EXIT_FAILED
-            except KeyboardInterrupt:   # a second Ctrl-C: stop now, keep nothing new
-                progress.close()
-                pictures.discard()
-                print("interrupted twice: stopped at once; the output folder is as it was",
-                      file=sys.stderr)
-                return EXIT_INTERRUPTED
+    if staged.checkpoint_path.parent != out:
+        _say(args.quiet, f"{out} holds an earlier result, kept until this run ends; "
+             f"this run's checkpoints wait in {staged.tmp} (--resume it if the run is "
+             "killed)")
+    pictures = output.Pictures(sim, staged, view=args.view, quiet=args.quiet,
+                               resume_dir=None if resume_from is None else resume_from.parent)
+    progress = _Progress(args.quiet, sim.t, sc.run.t_end)
+    saver = output.CheckpointClock(sim, staged, sc.output.checkpoint_every)
+    interrupt.phase = interrupt.RUN
+    try:
+        result = execute(sim, progress=progress, on_frame=pictures.on_frame,
+                         frame_times=pictures.frame_times, stop=interrupt,
+                         on_chunk=saver)
+    except RunFailed as exc:
+        interrupt.phase = interrupt.WRITE
         progress.close()
-        pictures.finish(result)
-        try:
-            saver.save()            # the end state: --resume extends the run
-            written = staged.publish(result, pictures.files(),
-                                     resumed=resume_from is not None) + [checkpoint.FILE]
-        except OSError as exc:
-            print(f"could not write the results to {out}: {exc.strerror or exc}; nothing "
-                  "was kept", file=sys.stderr)
-            return EXIT_FAILED
+        pictures.discard()
+        for line in exc.lines:
+            print(f"run failed: {line}", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:   # a second Ctrl-C: stop now, keep nothing new
+        interrupt.phase = interrupt.WRITE
+        progress.close()
+        pictures.discard()
+        print("interrupted twice: stopped at once; the output folder's results are as "
+              "they were", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    interrupt.phase = interrupt.WRITE
+    progress.close()
     s = result.summary
+    if why:
+        s.setdefault("auto", {})["run.arch"] = why
+    bad = [(k, r) for k, r in enumerate(s["realizations"]) if r["status"] == "unstable"]
+    for k, r in bad:
+        print(f"realization {k} (seed {r['seed']}) went unstable at t = {r['t_stop']:.4g} s: "
+              f"{r['reason']}", file=sys.stderr)
+    if bad:
+        s["status"] = "failed"
+        if output.holds_result(out):
+            pictures.discard()
+            print(f"{UNSTABLE_HINT}; this run's results were not written: the earlier "
+                  f"result in {out} is kept as it was", file=sys.stderr)
+            return EXIT_FAILED
+    try:
+        pictures.finish(result)
+        saver.save(staged.path(checkpoint.FILE))     # the end state: --resume extends it
+        written = staged.publish(result, pictures.files() + [checkpoint.FILE])
+    except OSError as exc:
+        print(f"could not write the results to {out}: {exc.strerror or exc}; none of "
+              "them was kept", file=sys.stderr)
+        return EXIT_FAILED
+    if bad:
+        print(f"the unstable realizations' results were not written (status \"failed\" "
+              f"in {out / 'summary.json'}); {UNSTABLE_HINT}", file=sys.stderr)
+        return EXIT_FAILED
     if sim.interrupted:
         print(f"interrupted at t = {sim.t:.4g} of {sc.run.t_end:.4g} s: kept "
               f"{', '.join(written)} in {out} (status \"interrupted\"); continue with "
               f"python -m taichi_hsdem --resume {out}", file=sys.stderr)
         return EXIT_INTERRUPTED
-    bad = [(k, r) for k, r in enumerate(s["realizations"]) if r["status"] == "unstable"]
-    if bad:
-        for k, r in bad:
-            print(f"realization {k} (seed {r['seed']}) went unstable at t = {r['t_stop']:.4g} s: "
-                  f"{r['reason']}", file=sys.stderr)
-        print(f"its results were not written; {UNSTABLE_HINT}", file=sys.stderr)
-        return EXIT_FAILED
+    if interrupt.requested:
+        print(f"interrupted while the results were written: all of them were written "
+              f"to {out}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     clogged = sum(1 for r in s["realizations"] if r["clogged"])
     stats = s["statistics"] or {}
     mean = output.estimate_text(s["mean_escapees"], s["mean_escapees_ci"])

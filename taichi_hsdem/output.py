@@ -1,14 +1,17 @@
 """Writing a run's results: summary.json, escapees.csv, scene.resolved.toml, the
 checkpoint, the plots, video.mp4 and the ParaView series.
 
-A run's files wait in a hidden staging folder inside the output folder
-(:class:`Staging`) until the run ends; then they are moved into place together,
-summary.json last, and result files an earlier run left there that this one
-does not write are removed, so that the folder never mixes two runs. Every file
-is written to a temporary name and renamed, so nothing half-written ever stands
-under a result's name. The checkpoint is the exception that proves the rule: it
-is the run's own state, written straight into the folder (atomically) at its
-wall-clock interval so that a run killed hard can still be resumed.
+A run only ever replaces or removes files that runs of this project wrote in its
+folder (listed in :data:`MANIFEST`), and refuses a folder holding a file of a
+result name that none wrote (:func:`foreign_files`). Its files wait in a hidden
+staging folder inside the output folder (:class:`Staging`, which also holds the
+folder's lock) until the run ends; then they are moved into place together,
+summary.json last, and files an earlier run wrote that this one does not are
+removed, so that the folder never mixes two runs. Every file is written to a
+temporary name and renamed, so nothing half-written ever stands under a result's
+name. The checkpoint is the run's own state: into a folder with no earlier result
+it goes straight in at its wall-clock interval, so that a run killed hard can be
+resumed; beside an earlier result it waits in the staging folder.
 """
 from __future__ import annotations
 
@@ -75,10 +78,16 @@ def write_series(series, statuses, out: Path):
     atomic_write(out / "escapees.csv", buf.getvalue())
 
 
-#: Files (and folders) a run writes into its output folder; the ones an earlier
-#: run left there and this run does not write are removed when it publishes.
+#: Files (and folders) a run writes into its output folder.
 RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "summary.json", "video.mp4",
                 "escapees.png", "pmf.png", "series.pvd", "vtk", checkpoint.FILE)
+#: The list of the files the runs of this project wrote in a folder: only these
+#: are ever replaced or removed there.
+MANIFEST = ".taichi_hsdem-files.json"
+#: Held (``flock``) while a run writes a folder, so that two runs never mix.
+LOCK = ".taichi_hsdem.lock"
+#: Prefix of the hidden folder a run's files wait in (:class:`Staging`).
+STAGING_PREFIX = ".incomplete-"
 
 
 def estimate_text(mean, ci) -> str:
@@ -89,28 +98,109 @@ def estimate_text(mean, ci) -> str:
     return f"{num(mean)} [{num(lo)}, {num(hi)}]"
 
 
+class FolderInUse(OSError):
+    """Another run is writing the output folder."""
+
+
+def _is_run_summary(path: Path) -> bool:
+    """``summary.json`` of a run of this project (a folder from before manifests)."""
+    try:
+        with open(path, "rb") as fh:
+            data = json.loads(fh.read(1 << 24))
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and {"version", "realizations", "scene"} <= set(data)
+
+
+def owned_files(out: Path) -> set[str]:
+    """The names in ``out`` that runs of this project wrote there: the manifest's,
+    or, in a folder a run of an earlier version wrote (no manifest, a run's
+    ``summary.json``), the result names present."""
+    out = Path(out)
+    try:
+        data = json.loads((out / MANIFEST).read_text())
+        return {n for n in data["files"] if isinstance(n, str) and n in RESULT_FILES}
+    except FileNotFoundError:
+        pass
+    except (OSError, ValueError, KeyError, TypeError):
+        return set()
+    if _is_run_summary(out / "summary.json"):
+        return {n for n in RESULT_FILES if os.path.lexists(out / n)}
+    return set()
+
+
+def foreign_files(out: Path) -> list[str]:
+    """Names in ``out`` that a run may write (or remove) but that no run of this
+    project wrote: a run refuses such a folder rather than lose the user's files."""
+    out = Path(out)
+    if not out.is_dir():
+        return []
+    mine = owned_files(out)
+    return [n for n in RESULT_FILES if os.path.lexists(out / n) and n not in mine]
+
+
+def holds_result(out: Path) -> bool:
+    """``out`` holds the result (or checkpoint) of an earlier run."""
+    return bool(owned_files(out) & {"summary.json", checkpoint.FILE})
+
+
 class Staging:
     """The output folder of one run and the hidden folder its files wait in.
 
-    ``with Staging(out) as staged``: creates ``out`` (if needed) and
+    ``with Staging(out) as staged``: creates ``out`` (if needed), takes its lock
+    (:class:`FolderInUse` when another run holds it) and makes
     ``out/.incomplete-*``; :meth:`path` names a file in the staging folder;
     :meth:`publish` moves the results into ``out``; leaving the block removes the
-    staging folder, and ``out`` too when this run created it and left it empty.
+    staging folder and the lock, and ``out`` too when this run created it and
+    left it empty.
+
+    The run's checkpoints (:attr:`checkpoint_path`) go straight into ``out`` when
+    it holds no earlier result, so that a run killed hard can be resumed with
+    ``--resume out``; otherwise they wait in the staging folder (``--resume
+    out/.incomplete-*`` continues them), and the earlier result stays exactly as
+    it was until this run publishes.
     """
 
-    def __init__(self, out: Path):
+    def __init__(self, out: Path, continuing: bool = False):
         self.out = Path(out)
         self.tmp = None
         self._created = False
+        self._lock = None
+        self.continuing = continuing
 
     def __enter__(self):
-        self._created = not self.out.exists()
+        self._created = not os.path.lexists(self.out)
         self.out.mkdir(parents=True, exist_ok=True)
-        self.tmp = Path(tempfile.mkdtemp(prefix=".incomplete-", dir=self.out))
+        try:
+            self._take_lock()
+            self.tmp = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=self.out))
+        except BaseException:
+            self.__exit__()
+            raise
+        straight = self.continuing or not holds_result(self.out)
+        self.checkpoint_path = (self.out if straight else self.tmp) / checkpoint.FILE
         return self
 
+    def _take_lock(self):
+        import fcntl
+        fh = open(self.out / LOCK, "a+")
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.close()
+            raise FolderInUse(f"another run is writing to {self.out}") from None
+        self._lock = fh
+
     def __exit__(self, *exc):
-        shutil.rmtree(self.tmp, ignore_errors=True)
+        if self.tmp is not None:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+        if self._lock is not None:
+            try:
+                os.unlink(self.out / LOCK)
+            except OSError:
+                pass
+            self._lock.close()
+            self._lock = None
         if self._created:
             try:
                 self.out.rmdir()             # only if nothing was kept
@@ -120,24 +210,37 @@ class Staging:
     def path(self, name: str) -> Path:
         return self.tmp / name
 
-    def publish(self, result, extra: list[str], resumed: bool = False) -> list[str]:
+    def publish(self, result, extra: list[str]) -> list[str]:
         """Write the scene, the series and the summary beside the files ``extra``
-        already staged, then move them all into the folder (summary last); returns
-        the names kept. A fresh run removes what an earlier run left and it does not
-        write; a resumed run keeps the earlier part's files it does not replace."""
+        already staged (the checkpoint among them when it waited here), then move
+        them all into the folder (summary last) and record them in the manifest;
+        returns the names written. A fresh run removes the files an earlier run
+        wrote and it does not; a continued run keeps the earlier part's files it
+        does not replace. Nothing the runs of this project did not write is
+        touched."""
         statuses = [r["status"] for r in result.summary["realizations"]]
         write_resolved_scene(result.scene, self.tmp, result.notes)
         write_series(result.series, statuses, self.tmp)
+        write_summary(result.summary, self.tmp)
         names = ["scene.resolved.toml", "escapees.csv", *extra]
+        earlier = owned_files(self.out)
+        kept = set(names) | {"summary.json", checkpoint.FILE}
+        if self.continuing:
+            kept |= earlier
+        # the manifest first names every file this and the earlier run wrote, so
+        # that a crash part-way leaves no file of ours unlisted
+        _write_manifest(self.out, kept | earlier)
         for name in names:
             _replace(self.tmp / name, self.out / name)
-        if not resumed:
-            for name in RESULT_FILES:
-                if name not in names and name not in ("summary.json", checkpoint.FILE):
-                    _remove(self.out / name)
-        write_summary(result.summary, self.tmp)
+        for name in earlier - kept:
+            _remove(self.out / name)
         _replace(self.tmp / "summary.json", self.out / "summary.json")
+        _write_manifest(self.out, {n for n in kept if os.path.lexists(self.out / n)})
         return names + ["summary.json"]
+
+
+def _write_manifest(out: Path, names):
+    atomic_write(out / MANIFEST, json.dumps({"files": sorted(names)}) + "\n")
 
 
 def _replace(src: Path, dst: Path):
@@ -151,13 +254,13 @@ def _replace(src: Path, dst: Path):
 def _remove(path: Path):
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path)
-    elif path.exists() or path.is_symlink():
+    elif os.path.lexists(path):
         path.unlink()
 
 
 class CheckpointClock:
     """``on_chunk`` hook of a run: a checkpoint every ``every`` seconds of wall
-    time (0: never during the run), straight into the output folder."""
+    time (0: never during the run), at the staging's checkpoint path."""
 
     def __init__(self, sim, staged: Staging, every: float):
         self.sim, self.staged, self.every = sim, staged, float(every)
@@ -168,8 +271,8 @@ class CheckpointClock:
         if self.every > 0 and time.perf_counter() - self.last >= self.every:
             self.save()
 
-    def save(self):
-        checkpoint.save(self.sim, self.staged.out / checkpoint.FILE)
+    def save(self, path: Path | None = None):
+        checkpoint.save(self.sim, path or self.staged.checkpoint_path)
         self.last = time.perf_counter()
         self.saved += 1
 
@@ -179,7 +282,7 @@ class Pictures:
     series, and at the end the plots; each into the staging folder."""
 
     def __init__(self, sim, staged: Staging, view: bool = False, quiet: bool = False,
-                 resumed: bool = False):
+                 resume_dir: Path | None = None):
         self.sim, self.staged = sim, staged
         self.recorder = None
         self.vtk = None
@@ -206,7 +309,7 @@ class Pictures:
         if sc.output.vtk:
             from .paraview import ParaViewUnavailable
             try:
-                self.vtk = _series_writer(sim, staged, resumed)
+                self.vtk = _series_writer(sim, staged, resume_dir)
             except ParaViewUnavailable as exc:
                 self.notes["vtk"] = {"skipped": str(exc)}
                 print(f"ParaView output skipped: {exc}", file=sys.stderr)
@@ -242,6 +345,11 @@ class Pictures:
             if self.recorder.error is not None:
                 print(f"video not written: rendering failed ({self.recorder.error})",
                       file=sys.stderr)
+            if not self.staged.path("video.mp4").exists():
+                # e.g. a continued run with no frame time left: name no file
+                summary["video"]["file"] = None
+                if self.recorder.error is None:
+                    summary["video"]["skipped"] = "no frame fell in this run"
         if self.vtk is not None:
             self.vtk.close()
             summary["vtk"] = {"index": "series.pvd", "frames": self.vtk_frames}
@@ -259,7 +367,7 @@ class Pictures:
         return [n for n in names if (self.staged.tmp / n).exists()]
 
 
-def _series_writer(sim, staged: Staging, resumed: bool):
+def _series_writer(sim, staged: Staging, resume_dir: Path | None):
     from .geometry.shapes import outline_polygon
     from .paraview import FluidGrid, SeriesWriter
     m = sim.model
@@ -268,13 +376,14 @@ def _series_writer(sim, staged: Staging, resumed: bool):
     if sim.fluid is not None:
         grid = FluidGrid(origin=(g.x_min, g.y_min), spacing=m.fluid_dx, active=m.fluid_active)
     r = sim.scene.output.video_realization
-    old = staged.out / "vtk"
-    if resumed and old.is_dir():     # go on with the earlier part's series
-        shutil.copytree(old, staged.path("vtk"))
-        shutil.copy2(staged.out / "series.pvd", staged.path("series.pvd"))
+    old = None if resume_dir is None else Path(resume_dir)
+    if old is not None and (old / "vtk").is_dir() and (old / "series.pvd").is_file():
+        # go on with the earlier part's series
+        shutil.copytree(old / "vtk", staged.path("vtk"))
+        shutil.copy2(old / "series.pvd", staged.path("series.pvd"))
     return SeriesWriter(staged.tmp, [r], g.outline, list(g.obstacles),
                         [outline_polygon(s.shape) for s in m.species], grid,
-                        resume=sim.t if resumed else None)
+                        resume=sim.t if resume_dir is not None else None)
 
 
 def _vtk_frame(writer, sim):

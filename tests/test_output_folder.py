@@ -1,0 +1,162 @@
+"""The output folder's promises: a run never deletes or overwrites a file that no
+run of this project wrote, never mixes two runs, and a failed run leaves the
+earlier result exactly as it was; Ctrl-C is obeyed from the first moment."""
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from taichi_hsdem import output
+from taichi_hsdem.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+HOURGLASS = str(ROOT / "scenes" / "hourglass24.toml")
+SHORT = ["--set", "run.t_end=0.2", "--quiet"]
+UNSTABLE = ["--set", "run.dt=0.5", "--set", "run.force_dt=true", "--set", "run.t_end=30",
+            "--quiet"]
+
+
+def snapshot(folder: Path) -> dict:
+    """Every file under ``folder`` (hidden ones too) with the hash of its bytes."""
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def user_folder(tmp_path) -> Path:
+    out = tmp_path / "mine"
+    (out / "vtk").mkdir(parents=True)
+    (out / "vtk" / "thesis_figure.vtp").write_text("user data")
+    (out / "video.mp4").write_bytes(b"my holiday video")
+    (out / "notes.txt").write_text("keep me")
+    return out
+
+
+def test_a_folder_holding_the_users_files_of_result_names_is_refused(tmp_path, capsys):
+    out = user_folder(tmp_path)
+    before = snapshot(out)
+    assert main([HOURGLASS, "--out", str(out), *SHORT]) == 2
+    err = capsys.readouterr().err
+    assert "video.mp4" in err and "vtk" in err and "no run of taichi_hsdem" in err
+    assert len(err.strip().splitlines()) == 1
+    assert snapshot(out) == before                       # not a byte changed
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "video.mp4", "vtk"]
+
+
+def test_other_files_of_the_user_survive_runs_and_reruns(tmp_path, capsys):
+    """A folder with the user's own notes: runs write beside them; a rerun that
+    writes fewer files removes only the earlier run's."""
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep me")
+    (out / "escapees.png.bak").write_text("also mine")
+    assert main([HOURGLASS, "--out", str(out), *SHORT, "--vtk"]) == 0
+    assert (out / "series.pvd").is_file() and (out / "vtk").is_dir()
+    manifest = json.loads((out / output.MANIFEST).read_text())["files"]
+    assert {"summary.json", "series.pvd", "vtk", "checkpoint.npz"} <= set(manifest)
+    assert main([HOURGLASS, "--out", str(out), *SHORT]) == 0     # no --vtk this time
+    assert not (out / "series.pvd").exists() and not (out / "vtk").exists()
+    assert (out / "notes.txt").read_text() == "keep me"
+    assert (out / "escapees.png.bak").read_text() == "also mine"
+    assert "vtk" not in json.loads((out / output.MANIFEST).read_text())["files"]
+    assert not [p for p in out.iterdir() if p.name.startswith((".incomplete", output.LOCK))]
+
+
+def test_a_folder_of_an_earlier_version_without_manifest_is_a_run_folder(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main([HOURGLASS, "--out", str(out), *SHORT]) == 0
+    (out / output.MANIFEST).unlink()                  # as a run before manifests left it
+    assert main([HOURGLASS, "--out", str(out), *SHORT]) == 0
+    assert (out / output.MANIFEST).is_file()
+
+
+def test_an_unstable_run_leaves_the_earlier_result_exactly_as_it_was(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main([HOURGLASS, "--out", str(out), *SHORT]) == 0
+    before = snapshot(out)
+    capsys.readouterr()
+    assert main([HOURGLASS, "--out", str(out), *UNSTABLE]) == 1
+    err = capsys.readouterr().err
+    assert "unstable" in err and "kept as it was" in err and "Traceback" not in err
+    assert snapshot(out) == before                       # checkpoint included
+
+
+def test_an_unstable_run_into_a_new_folder_is_marked_failed(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main([HOURGLASS, "--out", str(out), *UNSTABLE]) == 1
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "failed"                       # never complete-looking
+    assert s["realizations"][0]["status"] == "unstable"
+
+
+def test_two_runs_never_write_one_folder_at_once(tmp_path, capsys):
+    out = tmp_path / "o"
+    with output.Staging(out):                            # another run is writing it
+        assert main([HOURGLASS, "--out", str(out), *SHORT]) == 2
+        err = capsys.readouterr().err
+        assert "another run is writing" in err
+    assert not out.exists()                              # that run made it, and kept nothing
+
+
+@pytest.mark.parametrize("make, expected", [
+    (lambda d: "", "folder name is empty"),
+    (lambda d: (os.symlink(d / "gone", d / "dangling"), str(d / "dangling"))[1],
+     "does not exist"),
+    (lambda d: (os.symlink(d / "loop", d / "loop"), str(d / "loop" / "x"))[1],
+     "loop"),
+    (lambda d: str(d / ("n" * 300)), "longer than 255 bytes"),
+])
+def test_odd_output_paths_are_refused_in_one_line(tmp_path, capsys, make, expected):
+    target = make(tmp_path)
+    assert main([HOURGLASS, "--out", target, *SHORT]) == 2
+    err = capsys.readouterr().err
+    assert expected in err.lower() or expected in err, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_resume_into_another_folder_does_not_mix_it_with_that_folders_run(tmp_path, capsys):
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert main([HOURGLASS, "--out", str(b), *SHORT, "--vtk"]) == 0   # b: an unrelated run
+    assert main([HOURGLASS, "--out", str(a), *SHORT]) == 0
+    a_before = snapshot(a)
+    assert main(["--resume", str(a), "--out", str(b), "--set", "run.t_end=0.3",
+                 "--quiet"]) == 0
+    assert snapshot(a) == a_before
+    assert not (b / "vtk").exists() and not (b / "series.pvd").exists()
+    s = json.loads((b / "summary.json").read_text())
+    assert s["t_reached"] == pytest.approx(0.3, abs=1e-3)
+
+
+def _sigint_during_setup(tmp_path, ignore_sigint: bool):
+    out = tmp_path / "o"
+    cmd = [sys.executable, "-m", "taichi_hsdem", HOURGLASS, "--out", str(out),
+           "--set", "run.t_end=50", "--quiet"]
+    pre = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignore_sigint else None
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=pre)
+    deadline = time.time() + 120
+    # the staging folder appears once the scene is valid, before the simulation
+    # is built (Taichi's kernels, placement, the first pressure solve)
+    while time.time() < deadline and not (out.is_dir() and any(
+            p.name.startswith(".incomplete") for p in out.iterdir())):
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGINT)
+    err = proc.communicate(timeout=120)[1]
+    return proc.returncode, err, out
+
+
+@pytest.mark.parametrize("ignore_sigint", [False, True])
+def test_ctrl_c_during_set_up_exits_130_and_writes_nothing(tmp_path, ignore_sigint):
+    code, err, out = _sigint_during_setup(tmp_path, ignore_sigint)
+    assert code == 130, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    if "set-up" in err:
+        assert not out.exists()                          # it made the folder: gone again
+    else:   # set-up had just ended: the run's first chunk kept, as the README says
+        assert "interrupted at t =" in err
+        assert json.loads((out / "summary.json").read_text())["status"] == "interrupted"
