@@ -299,6 +299,86 @@ def test_strip_prints_time_escapees_and_colour_bar(renderer, frame):
     assert tuple(render.colormap(0.0)) in colours and tuple(render.colormap(1.0)) in colours
 
 
+def strip_text_at(renderer, image, text, col):
+    """Whether ``text`` is printed in the strip at column ``col`` (lit pixels
+    exactly the font's, over the text's box)."""
+    k = renderer._scale
+    strip = image[renderer.domain_height:]
+    mask = text_mask(text, k)
+    top = (strip.shape[0] - 7 * k) // 2
+    region = strip[top:top + mask.shape[0], col:col + mask.shape[1]]
+    lit = np.all(region == np.array(render.TEXT_COLOR, dtype=np.uint8), axis=2)
+    return lit.shape == mask.shape and bool(np.array_equal(lit, mask))
+
+
+def bar_labels(renderer, image, unit, p_min, p_max):
+    """The columns of the colour bar's labels ``p (<unit>) p_min`` and ``p_max``
+    (None where absent): the bar's first and last columns are the colour map's
+    ends, on the strip's middle row."""
+    strip = image[renderer.domain_height:]
+    k = renderer._scale
+    row = strip[(strip.shape[0] - 7 * k) // 2 + 3]
+    first = np.nonzero(np.all(row == render.colormap(0.0), axis=1))[0]
+    last = np.nonzero(np.all(row == render.colormap(1.0), axis=1))[0]
+    if not (first.size and last.size):
+        return None, None
+    lo = f"p ({unit}) {p_min:.3g}"
+    lo_col = first[0] - 2 * k - text_mask(lo, k).shape[1]
+    return (lo_col if strip_text_at(renderer, image, lo, lo_col) else None,
+            last[-1] + 1 + 2 * k if strip_text_at(renderer, image, f"{p_max:.3g}",
+                                                  last[-1] + 1 + 2 * k) else None)
+
+
+def test_colour_bar_is_labelled_with_its_unit_and_range(renderer, frame):
+    """SI: 'p (Pa) 0' left of the bar and '100' right of it, 't = 1.250 s'."""
+    lo, hi = bar_labels(renderer, frame, "Pa", *P_RANGE)
+    assert lo is not None and hi is not None and lo < hi
+
+
+def test_dimensionless_scene_prints_no_seconds_and_no_pascals(renderer):
+    """A dimensionless scene's strip reads 't = 1.250' and 'p (dimensionless)';
+    a title too long to fit beside the bar gives way to the time and count."""
+    r = render.Renderer(BBOX, OUTLINE, [], [shapes.circle(0.3)], width=WIDTH,
+                        pressure_shape=P_SHAPE, pressure_range=P_RANGE, title="x" * 40,
+                        units="dimensionless")
+    img = r.draw(X[:0], THETA[:0], TEMPLATE[:0], VISIBLE[:0], pressure=pressure_field(),
+                 t=1.25, escapees=12)
+    assert strip_text_at(r, img, "t = 1.250   escapees 12", 4)
+    lo, hi = bar_labels(r, img, "dimensionless", *P_RANGE)
+    assert lo is not None and hi is not None
+    with pytest.raises(ValueError, match="units"):
+        render.Renderer(BBOX, OUTLINE, [], [shapes.circle(0.3)], units="cgs")
+    r.close()
+
+
+def test_growing_range_keeps_a_tenfold_pressure_rise_unsaturated(renderer):
+    """grow_range (the video's scale): the range starts at P_RANGE and widens to
+    each frame's extremes. A field that rises 10x (the inlet pressure behind a
+    clog under a flow-rate inlet) is coloured on the new range, not clipped at
+    the old p_max where all of x < 3.6 would be one colour; a later lower field
+    is drawn on the widened range (it never shrinks)."""
+    r = render.Renderer(BBOX, OUTLINE, [], [shapes.circle(0.3)], width=WIDTH,
+                        pressure_shape=P_SHAPE, pressure_range=P_RANGE, grow_range=True)
+    none = (X[:0], THETA[:0], TEMPLATE[:0], VISIBLE[:0])
+    xs = np.array([0.25, 0.75, 1.25, 2.75, 3.25, 3.85])
+    r.draw(*none, pressure=pressure_field())
+    assert r.pressure_range == P_RANGE                # within the initial range
+    rise = 10.0 * pressure_field()
+    img = r.draw(*none, pressure=rise)
+    p_max = float(rise.max())                         # 987.5, the cell at x = 0.05
+    assert r.pressure_range == (0.0, p_max)
+    got = np.array([pixel(r, img, (x, 1.65)) for x in xs])
+    cells = 10.0 * cell_pressure((np.floor(xs / 0.1) + 0.5) * 0.1)
+    np.testing.assert_array_equal(got, render.colormap(cells / p_max))
+    assert np.all(np.diff(luminance(got)) < 0)       # the gradient shows upstream too
+    assert bar_labels(r, img, "Pa", 0.0, p_max)[1] is not None
+    img = r.draw(*none, pressure=pressure_field())
+    assert r.pressure_range == (0.0, p_max)
+    got = np.array([pixel(r, img, (x, 1.65)) for x in xs])
+    np.testing.assert_array_equal(got, render.colormap(cells / 10.0 / p_max))
+    r.close()
+
+
 # ------------------------------------------------------------------ triangulation
 
 def polygon_area(v):

@@ -262,10 +262,12 @@ def test_squares_are_drawn_turned_by_their_theta(squares_run):
 
 # ------------------------------------------------------------------ in process
 
-def test_frame_zero_is_the_initial_state_and_the_range_is_fixed(tmp_path):
+def test_frame_zero_is_the_initial_state_and_the_range_holds_every_frame(tmp_path):
     """The recorder on a Simulation in this process: frame 0 shows the placed
-    particles before any step, the colour range is the initial solve's for every
-    frame, and frames land at output.frames times from 0 to t_end."""
+    particles before any step, the colour range starts at the initial solve's and
+    only widens, holding every frame's pressure (nothing clipped), the strip is
+    in the scene's units (hourglass24 is dimensionless), and frames land at
+    output.frames times from 0 to t_end."""
     needs_vulkan()
     from taichi_hsdem import Simulation
     from taichi_hsdem.render import VideoRecorder
@@ -277,20 +279,28 @@ def test_frame_zero_is_the_initial_state_and_the_range_is_fixed(tmp_path):
     rec = VideoRecorder(sim, tmp_path / "video.mp4")
     finite = p0[np.isfinite(p0)]
     assert rec.pressure_range == (finite.min(), finite.max())
+    assert (rec.renderer.time_unit, rec.renderer.pressure_unit) == ("", "dimensionless")
     assert rec.frame_times == pytest.approx([0.0, 0.5 / 3, 1.0 / 3, 0.5])
     seen = []
     ranges = []
+    extremes = []
 
     def on_frame(s):
         seen.append(s.t)
         rec(s)
         ranges.append(rec.renderer.pressure_range)
+        p = s.pressure()[0]
+        extremes.append((p[np.isfinite(p)].min(), p[np.isfinite(p)].max()))
 
     result = sim.run(on_frame=on_frame, frame_times=rec.frame_times)
     rec.close(keep=True)
     assert rec.error is None and rec.frames == 4
     assert seen[0] == 0.0 and seen[-1] == pytest.approx(0.5, abs=sim.dt)
-    assert all(r == ranges[0] for r in ranges)
+    # each frame widens the range so far to its own extremes, never narrows it
+    before = (finite.min(), finite.max())
+    for now, (lo, hi) in zip(ranges, extremes):
+        assert now == (min(before[0], lo), max(before[1], hi))
+        before = now
     assert (tmp_path / "video.mp4").is_file()
     assert not (tmp_path / "video.mp4.part.mp4").exists()
 

@@ -6,7 +6,7 @@ and orientation. It is drawn with Taichi's GGUI on the process's hidden window
 (:mod:`.window`; on a machine without a GPU the Mesa software driver from the
 Debian packages ``mesa-vulkan-drivers libvulkan1`` does it) and read back as a
 numpy image, to which a strip with the time, the escapee count and the colour
-bar's range is added with the built-in bitmap font (:mod:`.font`). The window's
+bar with its unit and range is added with the built-in bitmap font (:mod:`.font`). The window's
 image is cleared after every capture, so :meth:`Renderer.draw` draws everything
 each time. :mod:`.video` writes the frames as H.264.
 
@@ -31,7 +31,7 @@ from .font import GLYPH_H, even, format_time, stamp, text_mask
 from .window import (acquire_window, close_window, ensure_taichi, taichi_logging_at_least,
                      vulkan_status)
 
-__all__ = ["colormap", "Renderer"]
+__all__ = ["colormap", "finite_range", "Renderer"]
 
 # ---------------------------------------------------------------------------
 # Colours, as 8-bit RGB so that what the tests read back is exact.
@@ -70,6 +70,9 @@ _CIRCLE_SEGMENTS = 32
 _OUTLINE_PX = 1.25          # outline width, pixels
 _TICK_FROM, _TICK_TO, _TICK_HALF_WIDTH = 0.35, 0.92, 0.1   # disk tick, radii
 
+# The strip's time suffix and pressure unit for each value of the scene's units.
+_UNIT_LABELS = {"SI": (" s", "Pa"), "dimensionless": ("", "dimensionless")}
+
 # Roles of a template's local vertices, which decide their colour.
 _ROLE_OUTLINE, _ROLE_FILL = 0, 1
 
@@ -97,6 +100,27 @@ def colormap(s) -> np.ndarray:
 
 def _lut_index(s):
     return np.clip(np.rint(s * (_LUT_SIZE - 1)), 0, _LUT_SIZE - 1).astype(np.int32)
+
+
+def finite_range(p):
+    """``(min, max)`` of the finite values of ``p``, or None when none is finite.
+
+    A flat field is widened to ``(p, p + max(1, |p|))`` so that it can serve as
+    a colour-map range (``max > min``).
+
+    Examples
+    --------
+    >>> finite_range([3.0, float("nan"), 1.0]), finite_range([2.0, 2.0])
+    ((1.0, 3.0), (2.0, 4.0))
+    """
+    p = np.asarray(p, dtype=np.float64)
+    finite = p[np.isfinite(p)]
+    if finite.size == 0:
+        return None
+    lo, hi = float(finite.min()), float(finite.max())
+    if hi <= lo:
+        hi = lo + max(1.0, abs(lo))
+    return lo, hi
 
 
 # ---------------------------------------------------------------------------
@@ -264,7 +288,9 @@ class Renderer:
     ``width`` columns: the domain (its bounding box, aspect kept, rounded to even
     sizes for H.264 yuv420p) on top, and below it a dark strip holding the text
     ``"t = 1.234 s   escapees 12"`` (after the title, if any) on the left and,
-    when a pressure map is drawn, the colour bar with its range on the right.
+    when a pressure map is drawn, the colour bar on the right, labelled with the
+    pressure's unit and the range it spans: ``p (Pa) 0 [bar] 1.2e+03``. Where
+    the strip is too short for all of it the bar narrows, then the title goes.
 
     Parameters
     ----------
@@ -287,8 +313,18 @@ class Renderer:
         Each fluid pixel shows the value of the cell holding its centre.
         Without it the fluid is drawn in a plain pale colour.
     pressure_range : (p_min, p_max), optional
-        Fixed colour-map range, so that colours compare across frames; values
-        outside are clipped. Without it each frame uses its own finite min/max.
+        Colour-map range, so that colours compare across frames; values outside
+        are clipped unless ``grow_range``. Without it (and without
+        ``grow_range``) each frame uses its own finite min/max.
+    grow_range : bool, optional
+        Widen :attr:`pressure_range` (starting from the given one, or the first
+        frame's) to every drawn frame's finite min and max before colouring it:
+        the scale follows the largest pressure seen so far and never clips, so
+        a pressure that builds up (behind a clog under a flow-rate inlet) keeps
+        its gradient visible; colours compare across frames while it holds.
+    units : {"SI", "dimensionless"}, optional
+        The scene's units: the strip prints ``t = 1.250 s`` and ``p (Pa)``, or
+        ``t = 1.250`` and ``p (dimensionless)``.
     title : str, optional
         Printed before the time in the strip.
     pressure_extent : (x0, x1, y0, y1), optional
@@ -303,7 +339,8 @@ class Renderer:
     """
 
     def __init__(self, bbox, outline, obstacles, shapes, width=960, pressure_shape=None,
-                 pressure_range=None, title="", pressure_extent=None):
+                 pressure_range=None, title="", pressure_extent=None, grow_range=False,
+                 units="SI"):
         ok, reason = vulkan_status()
         if not ok:
             raise RuntimeError(reason)
@@ -322,6 +359,10 @@ class Renderer:
         self.strip_height = even((GLYPH_H + 8) * self._scale)
         self.height = self.domain_height + self.strip_height
         self.title = str(title)
+        if units not in _UNIT_LABELS:
+            raise ValueError(f"units must be one of {sorted(_UNIT_LABELS)}, got {units!r}")
+        self.time_unit, self.pressure_unit = _UNIT_LABELS[units]
+        self.grow_range = bool(grow_range)
 
         if pressure_shape is not None:
             nx, ny = (int(n) for n in pressure_shape)
@@ -516,12 +557,15 @@ class Renderer:
                              f"(pressure_shape {self.pressure_shape}), got shape {p.shape}")
         p = p.reshape(nx, ny)
         finite = np.isfinite(p)
+        seen = finite_range(p)
+        if self.grow_range and seen is not None:
+            if self.pressure_range is not None:
+                seen = (min(seen[0], self.pressure_range[0]), max(seen[1], self.pressure_range[1]))
+            self.pressure_range = seen
         if self.pressure_range is not None:
             p_min, p_max = self.pressure_range
-        elif finite.any():
-            p_min, p_max = float(p[finite].min()), float(p[finite].max())
-            if p_max <= p_min:
-                p_max = p_min + max(1.0, abs(p_min))
+        elif seen is not None:
+            p_min, p_max = seen
         else:
             return np.full((nx, ny), _PLAIN_INDEX, dtype=np.int32), None
         s = (np.where(finite, p, p_min) - p_min) / (p_max - p_min)
@@ -532,12 +576,19 @@ class Renderer:
         k = self._scale
         strip[:] = STRIP_BACKGROUND
         top = (strip.shape[0] - GLYPH_H * k) // 2
+        status = f"t = {format_time(t)}{self.time_unit}   escapees {int(escapees)}"
+        text = text_mask(f"{self.title}   {status}" if self.title else status, k)
         text_end = strip.shape[1]
         if p_range is not None:
-            # From the right: p_max label, colour bar, p_min label, "p".
-            bar_width = max(64, self.width // 5)
+            # From the right: p_max label, colour bar, "p (unit) p_min" label.
             hi = text_mask(f"{p_range[1]:.3g}", k)
-            lo = text_mask(f"p {p_range[0]:.3g}", k)
+            lo = text_mask(f"p ({self.pressure_unit}) {p_range[0]:.3g}", k)
+            # what the bar may take: the strip less margins, gaps and labels
+            room = strip.shape[1] - 18 * k - hi.shape[1] - lo.shape[1]
+            min_bar = 32 * k
+            if self.title and room - text.shape[1] < min_bar:
+                text = text_mask(status, k)       # the time and count matter more
+            bar_width = max(min_bar, min(self.width // 5, room - text.shape[1]))
             col = strip.shape[1] - 4 * k - hi.shape[1]
             stamp(strip, hi, top, col, TEXT_COLOR)
             col -= 2 * k + bar_width
@@ -546,11 +597,7 @@ class Renderer:
             col -= 2 * k + lo.shape[1]
             stamp(strip, lo, top, col, TEXT_COLOR)
             text_end = col - 6 * k
-        text = f"t = {format_time(t)} s   escapees {int(escapees)}"
-        if self.title:
-            text = f"{self.title}   {text}"
-        mask = text_mask(text, k)[:, :max(0, text_end - 4 * k)]
-        stamp(strip, mask, top, 4 * k, TEXT_COLOR)
+        stamp(strip, text[:, :max(0, text_end - 4 * k)], top, 4 * k, TEXT_COLOR)
 
     def close(self):
         """Free this renderer's Taichi fields and the shared window (a later

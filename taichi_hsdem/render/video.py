@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from .frame import Renderer
+from .frame import Renderer, finite_range
 
 
 class VideoWriter:
@@ -94,12 +94,15 @@ class VideoRecorder:
     that realization stopped (a clog, or an instability): it shows the final state
     once instead of repeating it up to ``t_end``.
 
-    The pressure colour map keeps one range for the whole video, that of the
-    pressure field at construction time, i.e. the initial solve (the open
-    channel with the particles as placed): colours compare across frames, values
-    beyond it (e.g. the inlet pressure rising behind a clog under a flow-rate
-    boundary condition) are clipped. The strip under each frame prints the range
-    next to the colour bar; :meth:`summary` reports it.
+    The pressure colour map starts from the range of the initial solve (the
+    open channel with the particles as placed) and widens to the largest (and
+    smallest) pressure any drawn frame held (``Renderer(grow_range=True)``):
+    colours compare across frames while the pressure stays within what was
+    seen, and nothing is clipped when it builds up (the inlet pressure rising
+    behind a clog under a flow-rate inlet), so the gradient stays visible. The
+    strip under each frame prints the unit (Pa, or "dimensionless" for a
+    dimensionless scene) and the range next to the colour bar; :meth:`summary`
+    reports the final range.
 
     The file is written as ``<name>.part.mp4`` and renamed by
     ``close(keep=True)``. A frame that fails to render stops the video (the run
@@ -124,12 +127,12 @@ class VideoRecorder:
             # Square cells of side dx from the domain's lower-left corner; the
             # top row may overhang y_max.
             extent = (g.x_min, g.x_min + nx * dx, g.y_min, g.y_min + ny * dx)
-            prange = self._range_of(sim.pressure()[self.r])
+            prange = finite_range(sim.pressure()[self.r])
         self.renderer = Renderer((g.x_min, g.x_max, g.y_min, g.y_max), g.outline,
                                  list(g.obstacles), [s.shape for s in m.species],
                                  width=sc.output.width, pressure_shape=pshape,
                                  pressure_range=prange, title=sc.name,
-                                 pressure_extent=extent)
+                                 pressure_extent=extent, grow_range=True, units=sc.units)
         self.viewer = viewer
         self.path = None if path is None else Path(path)
         self.tmp = None if path is None else self.path.with_name(self.path.name + ".part.mp4")
@@ -156,19 +159,6 @@ class VideoRecorder:
         ru = resource.getrusage(resource.RUSAGE_CHILDREN)
         return ru.ru_utime + ru.ru_stime
 
-    @staticmethod
-    def _range_of(p):
-        """Finite (min, max) of a pressure field, widened when flat; None when
-        nothing is finite (no solve yet)."""
-        p = np.asarray(p, dtype=float)
-        finite = p[np.isfinite(p)]
-        if finite.size == 0:
-            return None
-        lo, hi = float(finite.min()), float(finite.max())
-        if hi <= lo:
-            hi = lo + max(1.0, abs(lo))
-        return lo, hi
-
     def _display_pressure(self, p):
         """The field with every non-finite cell (solid wall) given its nearest
         finite cell's value. The renderer colours a fluid pixel by the cell
@@ -186,7 +176,8 @@ class VideoRecorder:
 
     @property
     def pressure_range(self):
-        """The fixed colour-map range, (p_min, p_max), or None without fluid."""
+        """The colour-map range so far, (p_min, p_max): the initial solve's,
+        widened by every drawn frame; None without fluid."""
         return self.renderer.pressure_range
 
     @property
@@ -205,9 +196,6 @@ class VideoRecorder:
             pres = None
             if sim.fluid is not None:
                 pres = self._display_pressure(sim.pressure()[r])
-                if self.renderer.pressure_range is None:
-                    # built before any solve: fix the range at the first frame's
-                    self.renderer.pressure_range = self._range_of(pres)
             st = sim.state()
             # the live counter: the results' count is only refreshed every check
             esc = int(sim.escaped()[r])

@@ -1,4 +1,4 @@
-"""Statistics of escapees before clogging (MODEL.md section 4, Figs. 9-13).
+"""Statistics of escapees before clogging (docs/model.md section 4, Figs. 9-13).
 
 Each realization of a clogging run yields ``s``, the number of particles that
 passed the constriction, and whether a clog ended it. The reference paper finds
@@ -22,7 +22,7 @@ One module per concern, re-exported here as a flat API:
 * :mod:`.pmf`: the histogram and the PMF of ``s / <s>`` on bins of whole ``s``
   (:func:`pmf_bins`).
 * :mod:`.gof`: the test of the geometric law's constant clogging probability
-  (:func:`geometric_fit_test`).
+  (:func:`geometric_fit_test`), reported from :data:`MIN_CLOGS` clogs on.
 * :mod:`.summary`: everything in one JSON-ready dict (:func:`summarize`), and
   the bias unstable realizations may carry (:func:`unstable_sensitivity`).
 
@@ -43,7 +43,7 @@ from .geometric import (
     mean_escapees,
     never_clogged_fraction,
 )
-from .gof import GeometricFitTest, geometric_fit_test, hazard_table
+from .gof import MIN_CLOGS, GeometricFitTest, geometric_fit_test, hazard_table
 from .pmf import PMF_BIN_FRACTION, histogram, normalized_pmf, pmf_bins
 from .summary import summarize, unstable_sensitivity
 
@@ -60,6 +60,7 @@ __all__ = [
     "clog_probability_per_escapee",
     "exponential_rate_fit",
     "GeometricFitTest",
+    "MIN_CLOGS",
     "geometric_fit_test",
     "hazard_table",
     "summarize",

@@ -18,7 +18,7 @@ import numpy as np
 from ._inputs import as_escapees, as_samples, check_confidence
 from .geometric import fit_geometric, never_clogged_fraction
 from .gof import geometric_fit_test
-from .pmf import PMF_BIN_FRACTION, histogram, pmf_bins
+from .pmf import PMF_BIN_FRACTION, _pmf_undefined_reason, histogram, pmf_bins
 
 UNSTABLE_NOTE = (
     "unstable realizations are left out of every statistic, as if censored at s = 0: "
@@ -142,6 +142,10 @@ def summarize(escapees, clogged, confidence: float = 0.95, *,
           ``mean_escapees_ci_method`` (``"profile_likelihood"``, or
           ``"exact_one_sided"`` / ``"uninformative"`` at the boundaries of
           :func:`~taichi_hsdem.stats.fit_geometric`).
+        * ``mean_escapees_lower_bound``: when nothing clogged, the one-sided
+          lower confidence bound of ``<s>`` (the interval's lower end; what the
+          runs show), else None; ``mean_escapees_note``: why ``mean_escapees``
+          is None (a sentence to print), else None.
         * ``plain_mean_escapees``: the plain mean of the counts, biased low when
           anything is censored (a never-clogged run counted as a clog).
         * ``clog_probability_per_escapee`` (``_ci``), ``fit_mean`` (``_ci``,
@@ -149,14 +153,17 @@ def summarize(escapees, clogged, confidence: float = 0.95, *,
           ``decay_rate_stderr``, ``decay_rate_ci``, ``never_clogged_fraction``
           (``_ci``, Wilson).
         * ``geometric_fit_test``: ``method``, ``statistic``, ``p_value``,
-          ``n_clogged`` of :func:`~taichi_hsdem.stats.geometric_fit_test`.
+          ``n_clogged``, ``reason`` of
+          :func:`~taichi_hsdem.stats.geometric_fit_test` (None and a reason
+          below :data:`~taichi_hsdem.stats.MIN_CLOGS` clogs).
         * ``unstable_sensitivity``: :func:`~taichi_hsdem.stats.unstable_sensitivity`.
         * ``histogram``: ``counts``, ``edges`` (clogged realizations, one bin per s).
         * ``normalized_pmf``: the bins of :func:`~taichi_hsdem.stats.pmf_bins`
           as columns ``centres`` (``x``), ``pmf``, ``stderr``, ``count``,
           ``s_lo``, ``s_hi``, with ``bin_width_x``, ``mean_s`` and
           ``n_realizations`` (the normaliser: all stable realizations);
-          empty lists and ``None`` when ``s/<s>`` is undefined.
+          empty lists and ``None`` when ``s/<s>`` is undefined, ``reason``
+          then saying why (else None).
 
     Examples
     --------
@@ -167,6 +174,8 @@ def summarize(escapees, clogged, confidence: float = 0.95, *,
     >>> d = summarize([10, 20, 30], [False, False, False], n_unstable=1)
     >>> d["clog_probability_per_escapee"], d["mean_escapees"], d["n_unstable"]
     (0.0, None, 1)
+    >>> round(d["mean_escapees_lower_bound"], 2), d["mean_escapees_note"]
+    (19.53, 'no realization clogged (3 ran): <s> is at least 19.5 (95 % one-sided bound)')
     >>> _ = json.dumps(d, allow_nan=False)
     """
     confidence = check_confidence(confidence)
@@ -180,6 +189,16 @@ def summarize(escapees, clogged, confidence: float = 0.95, *,
                 ("s_lo", "s_lo"), ("s_hi", "s_hi"))}
     for key in ("bin_width_x", "mean_s", "n_realizations"):
         columns[key] = bins[0][key] if bins else None
+    columns["reason"] = _pmf_undefined_reason(fit)
+    lower_bound, note = None, None
+    if fit.n_clogged == 0:
+        if fit.ci_method == "uninformative":
+            note = (f"nothing escaped and nothing clogged ({fit.n} ran): the runs say "
+                    "nothing about <s>")
+        else:
+            lower_bound = fit.mean_ci[0]
+            note = (f"no realization clogged ({fit.n} ran): <s> is at least "
+                    f"{lower_bound:.3g} ({100 * confidence:g} % one-sided bound)")
     unstable = unstable_sensitivity(s, c, n_unstable, unstable_escapees)
     return _plain({
         "n": fit.n,
@@ -192,6 +211,8 @@ def summarize(escapees, clogged, confidence: float = 0.95, *,
         "mean_escapees_ci": fit.mean_ci,
         "mean_escapees_method": "geometric_mle",
         "mean_escapees_ci_method": fit.ci_method,
+        "mean_escapees_lower_bound": lower_bound,
+        "mean_escapees_note": note,
         "plain_mean_escapees": float(s.mean()),
         "clog_probability_per_escapee": fit.p,
         "clog_probability_per_escapee_ci": fit.p_ci,
