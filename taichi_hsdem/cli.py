@@ -24,25 +24,20 @@ import time
 from pathlib import Path
 
 from . import checkpoint, output
+from .exits import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, Parser
 from .scene import SceneError, load_scene
 from .scene.toml import parse_toml
 
-EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_INTERRUPTED = 0, 1, 2, 130
 # Keys a resumed run may change: its end and what it writes.
 RESUMABLE_KEYS = ("run.t_end", "output.")
 
 
-class Parser(argparse.ArgumentParser):
-    """argparse with the project's exit status for bad arguments (2, one line)."""
-
-    def error(self, message):
-        print(f"{self.prog}: {message}", file=sys.stderr)
-        sys.exit(EXIT_INVALID)
-
-
 def _parser() -> argparse.ArgumentParser:
     p = Parser(prog="python -m taichi_hsdem",
-               description="Run a taichi_hsdem scene (LS-DEM + Hele-Shaw clogging simulation).")
+               description="Run a taichi_hsdem scene (LS-DEM + Hele-Shaw clogging simulation).",
+               epilog="The studies: python -m taichi_hsdem sweep|calibrate|figures|arches "
+                      "--help. 'python -m taichi_hsdem run SCENE.toml ...' is the same as "
+                      "without 'run'.")
     p.add_argument("scene", nargs="?", help="scene TOML file (see docs/scene.md)")
     p.add_argument("--resume", metavar="DIR",
                    help="continue the checkpoint in DIR (a run's output folder)")
@@ -231,7 +226,34 @@ def _same_folder(a: Path, b: Path) -> bool:
         return False
 
 
+#: ``python -m taichi_hsdem COMMAND ...``: the studies' command lines, by module.
+COMMANDS = {"sweep": "sweep", "calibrate": "calibrate", "figures": "figures",
+            "arches": "arches"}
+
+
+def _command(argv) -> int | None:
+    """Run ``argv`` as a study's command line when it names one; None otherwise."""
+    if not argv or argv[0] not in COMMANDS or os.path.exists(argv[0]):
+        return None
+    import importlib
+    try:
+        module = importlib.import_module(f".studies.{COMMANDS[argv[0]]}", __package__)
+        return module.main(list(argv[1:]), prog=f"python -m taichi_hsdem {argv[0]}")
+    except KeyboardInterrupt:
+        print(f"{argv[0]} interrupted: what finished before is kept (a rerun into the "
+              "same folder goes on from there)", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
 def main(argv=None) -> int:
+    """``python -m taichi_hsdem [run] SCENE.toml ...`` or ``python -m taichi_hsdem
+    sweep|calibrate|figures|arches ...``; the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["run"] and not os.path.exists("run"):
+        argv = argv[1:]
+    code = _command(argv)
+    if code is not None:
+        return code
     with _Interrupt() as interrupt:
         try:
             args = _parser().parse_args(argv)
@@ -380,9 +402,11 @@ def _run(args, scene, resume_from, staged, interrupt) -> int:
         return EXIT_INTERRUPTED
     clogged = sum(1 for r in s["realizations"] if r["clogged"])
     stats = s["statistics"] or {}
-    mean = output.estimate_text(s["mean_escapees"], s["mean_escapees_ci"])
-    _say(args.quiet, f"done in {s['wall_time_s']:.1f} s: {s['steps']} steps, <s> = {mean} "
-         f"(censoring-aware), {clogged}/{len(s['realizations'])} clogged, "
+    mean = stats.get("mean_escapees_note") or (
+        f"<s> = {output.estimate_text(s['mean_escapees'], s['mean_escapees_ci'])} "
+        "(censoring-aware)")
+    _say(args.quiet, f"done in {s['wall_time_s']:.1f} s: {s['steps']} steps, {mean}, "
+         f"{clogged}/{len(s['realizations'])} clogged, "
          f"{stats.get('n_never_clogged', 0)} never clogged -> {out}")
     return EXIT_OK
 

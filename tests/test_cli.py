@@ -126,3 +126,27 @@ def test_module_entry_point_and_clean_cwd(tmp_path):
     # the only thing written to the working directory is the default output folder
     assert sorted(p.name for p in tmp_path.iterdir()) == ["runs"]
     assert (tmp_path / "runs" / "hourglass24" / "summary.json").exists()
+
+
+def test_the_studies_are_subcommands_of_the_one_command_line(tmp_path, capsys):
+    """``python -m taichi_hsdem sweep|calibrate|figures|arches`` reach the studies'
+    own command lines (named so in their messages), and ``run`` is the plain one."""
+    assert main(["calibrate", HOURGLASS, "--target", "-1", "--lo", "0.1", "--hi", "0.9"]) == 2
+    assert capsys.readouterr().err.startswith(
+        "python -m taichi_hsdem calibrate: --target: must be a positive number")
+    assert main(["arches", str(tmp_path)]) == 2
+    assert "figure.json" in capsys.readouterr().err
+    assert main(["figures", "nonsense"]) == 2
+    assert "python -m taichi_hsdem figures" in capsys.readouterr().err
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert main(["run", HOURGLASS, "--out", str(a), "--set", "run.t_end=0.2", "--quiet"]) == 0
+    assert main([HOURGLASS, "--out", str(b), "--set", "run.t_end=0.2", "--quiet"]) == 0
+    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))
+    assert sa["final_state"] == sb["final_state"]
+
+
+def test_the_shipped_example_sweep_is_valid(tmp_path, capsys):
+    from taichi_hsdem.studies.sweep import load_sweep
+    sweep = load_sweep(ROOT / "scenes" / "sweep_friction.toml")
+    assert [p["particles.friction"] for p in sweep.points] == [0.1, 0.25, 0.5, 0.9]
+    assert Path(sweep.scene).resolve() == ROOT / "scenes" / "vani_phi026.toml"

@@ -160,3 +160,46 @@ def test_ctrl_c_during_set_up_exits_130_and_writes_nothing(tmp_path, ignore_sigi
     else:   # set-up had just ended: the run's first chunk kept, as the README says
         assert "interrupted at t =" in err
         assert json.loads((out / "summary.json").read_text())["status"] == "interrupted"
+
+
+def test_ctrl_c_in_the_middle_of_set_up_is_obeyed_even_when_sigint_was_ignored(
+        tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the simulation is being built (Taichi's kernels, placement, the
+    first solve), in a process that started with SIGINT ignored as a script's
+    background job does: exit 130, one line, nothing written."""
+    from taichi_hsdem import runner
+    build = runner.build
+
+    def build_then_ctrl_c(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        return build(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "build", build_then_ctrl_c)
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        code = main([HOURGLASS, "--out", str(tmp_path / "o"), *SHORT])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    err = capsys.readouterr().err
+    assert code == 130 and err.strip() == "interrupted during set-up: nothing was written"
+    assert not (tmp_path / "o").exists()
+
+
+def test_ctrl_c_while_the_results_are_written_lets_them_all_be_written(
+        tmp_path, capsys, monkeypatch):
+    publish = output.Staging.publish
+
+    def ctrl_c_then_publish(self, *args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        return publish(self, *args, **kwargs)
+
+    monkeypatch.setattr(output.Staging, "publish", ctrl_c_then_publish)
+    out = tmp_path / "o"
+    assert main([HOURGLASS, "--out", str(out), *SHORT]) == 130
+    err = capsys.readouterr().err
+    assert err.startswith("interrupted while the results were written: all of them")
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "complete"
+    manifest = set(json.loads((out / output.MANIFEST).read_text())["files"])
+    assert manifest == {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    assert {"summary.json", "escapees.csv", "scene.resolved.toml", "checkpoint.npz"} <= manifest

@@ -69,16 +69,13 @@ import argparse
 import json
 import math
 import os
-import pathlib
 import statistics
 import sys
 import time
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from taichi_hsdem import backend  # noqa: E402
+from taichi_hsdem import backend
 
 CASES = ("disk-fast", "disk-ls", "square-ls")
 SIZES = (100, 1000, 10000)

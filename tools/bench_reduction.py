@@ -87,20 +87,17 @@ import io
 import json
 import math
 import os
-import pathlib
 import statistics
 import sys
 import time
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
+import numpy as np
+from scipy.spatial import cKDTree
 
-import numpy as np  # noqa: E402
-from scipy.spatial import cKDTree  # noqa: E402
-
-from taichi_hsdem.backend import ti  # noqa: E402  (sets the environment before Taichi loads)
+from taichi_hsdem.backend import ti  # sets the environment before Taichi loads
 from taichi_hsdem.dem.contact import contact_law
 from taichi_hsdem.dem.kmath import cross, spin
-from taichi_hsdem.laws import restitution_factor  # noqa: E402
+from taichi_hsdem.laws import restitution_factor
 
 vec2 = ti.math.vec2
 

@@ -17,11 +17,8 @@ import argparse
 import csv
 import math
 import pathlib
-import sys
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
-
-from taichi_hsdem.fluid import circular_inclusion_error  # noqa: E402
+from taichi_hsdem.fluid import circular_inclusion_error
 
 CONTRASTS = (1e-2, 1e2)
 RESOLUTIONS = (4, 8, 16, 32, 64)

@@ -19,15 +19,12 @@ obstacles); ``implicit`` and ``lagged`` carry the particles' volume
 """
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from taichi_hsdem import Simulation, load_scene  # noqa: E402
+from taichi_hsdem import Simulation, load_scene
 
 SCENE = Path(__file__).resolve().parents[1] / "scenes" / "vani_phi026.toml"
 MODELS = {"obstacle": ["fluid.particle_flux=false"],

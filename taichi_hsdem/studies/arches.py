@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..exits import Parser
 from ..geometry.distance import signed_distance
 from ..geometry.polygon import is_convex, point_segment_distance
 from ..geometry.shapes import outline_polygon, to_body, transform
@@ -419,10 +420,9 @@ def draw(result, path, examples=6, tol=DEFAULT_TOL):
     plt.close(fig)
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python tools/arches.py",
-                                description="The clogging arches of a finished "
-                                            "tools/figures.py folder.")
+def main(argv=None, prog: str = "python -m taichi_hsdem arches") -> int:
+    """Command line; exit 0 on success, 2 for invalid input."""
+    p = Parser(prog=prog, description="The clogging arches of a finished figures folder.")
     p.add_argument("folder", help="the figure's --out folder")
     p.add_argument("--tol", type=float, default=DEFAULT_TOL,
                    help=f"touching: gap at most this times d_b (default {DEFAULT_TOL})")

@@ -108,6 +108,7 @@ from .points import (DEFAULT_POINTS, DEFAULT_REALIZATIONS, FIGURES, PAPER_REALIZ
 from .cluster import Cluster, ClusterError
 from .plots import pyplot, render
 from ..scene import SceneError
+from ..exits import Parser
 
 
 
@@ -435,7 +436,7 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
     return {"out": out, "files": files, "points": rows, "runs": runs}
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser(prog: str) -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--quick", action="store_true",
                         help="tiny run for CI: few realizations, short t_end, small upstream "
@@ -458,7 +459,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="read back points finished earlier in --out/points/ (same "
                              "scene, realizations and code) instead of running them again "
                              "(default: --resume)")
-    p = argparse.ArgumentParser(prog="python tools/figures.py",
+    p = Parser(prog=prog,
                                 description="The clogging figures of Zhou et al. (2024), "
                                             "Figs. 8-13: PNG, CSV of the numbers, figure.json.")
     sub = p.add_subparsers(dest="figure", required=True, metavar="FIGURE")
@@ -481,11 +482,11 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
+def main(argv=None, prog: str = "python -m taichi_hsdem figures") -> int:
     """Command line; exit 0 on success, 1 when a point failed, 2 for invalid input."""
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        args = _parser().parse_args(argv)
+        args = _parser(prog).parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
 

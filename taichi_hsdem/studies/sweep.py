@@ -36,9 +36,23 @@ Examples
 ...                  [{"particles.friction": mu} for mu in (0.2, 0.4)],
 ...                  "runs/friction", common={"run.t_end": 10.0})    # doctest: +SKIP
 >>> [(r["folder"], r["mean_escapees"]) for r in rows]              # doctest: +SKIP
+
+Command line::
+
+    python -m taichi_hsdem sweep SWEEP.toml [--out DIR] [--resume | --no-resume]
+                                            [--quick] [--cluster ADDRESS] [--quiet]
+
+(``python tools/sweep.py`` is the same.) Each point writes ``DIR/<overrides>/``;
+the sweep writes ``DIR/sweep.csv`` and ``DIR/index.json``, ``DIR`` defaulting to
+``runs/<sweep file name>/``. ``--quick`` runs each point for a tenth of its
+``run.t_end`` with at most two realizations, into ``DIR/quick/``. Exit status: 0
+every point has its results; 1 a point failed or a realization went unstable (the
+other points are written); 2 the sweep file or a point is invalid (one line per
+problem; nothing is run).
 """
 from __future__ import annotations
 
+import argparse
 import csv
 import difflib
 import hashlib
@@ -46,6 +60,7 @@ import io
 import itertools
 import json
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -55,6 +70,7 @@ from ..scene import Scene, SceneError, load_scene, read_toml, scene_to_toml
 from ..scene.toml import toml_value
 from . import fmt
 from ..digest import code_digest
+from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
 from .cluster import Cluster
 
 __all__ = [
@@ -501,3 +517,62 @@ def run_point(scene: Scene, point: Mapping, common: Mapping, base: str, where: s
     summary = json.loads((where / SUMMARY).read_text())  # as later sweeps read it
     message = unstable_message(result)
     return ("unstable" if message else "ran"), summary, message
+
+
+def _parser(prog: str) -> argparse.ArgumentParser:
+    p = Parser(prog=prog, description="Run a parameter sweep: one base scene at many points of overrides, resumable.")
+    p.add_argument("sweep", help="sweep file (TOML)")
+    p.add_argument("--out", help="output folder (default runs/<sweep file name>/)")
+    p.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
+                   help="skip points whose folder holds a finished run of the same "
+                        "scene by the same package code (default: --resume)")
+    p.add_argument("--quick", action="store_true",
+                   help="smoke test: 1/10 of run.t_end, <= 2 realizations, into OUT/quick/")
+    p.add_argument("--cluster", metavar="ADDRESS",
+                   help="run the points on a Dask cluster: a scheduler address, or local[:N] "
+                        "for N worker processes here (the cluster extra)")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    return p
+
+
+def main(argv=None, prog: str = "python -m taichi_hsdem sweep") -> int:
+    """The sweep's command line (usage: the module doc); its exit status."""
+    try:
+        args = _parser(prog).parse_args(argv)
+    except SystemExit as exc:          # --help (0) or a bad argument (2)
+        return exc.code
+    from .cluster import ClusterError
+    try:
+        sweep = load_sweep(args.sweep)
+    except SweepError as exc:
+        for line in exc.problems:
+            print(line, file=sys.stderr)
+        return EXIT_INVALID
+    out = Path(args.out) if args.out else Path("runs") / Path(
+        args.sweep).stem
+    if args.quick:
+        out = out / "quick"
+
+    def say(message):
+        if not args.quiet:
+            print(message, file=sys.stderr, flush=True)
+
+    say(f"{args.sweep}: {len(sweep.points)} point(s) of {sweep.scene} -> {out}")
+    try:
+        rows = run_sweep(sweep.scene, list(sweep.points), out, resume=args.resume,
+                         progress=say, common=sweep.common, quick=args.quick,
+                         cluster=args.cluster)
+    except ClusterError as exc:
+        print(exc, file=sys.stderr)
+        return EXIT_INVALID
+    invalid = [r for r in rows if r["status"] == "invalid"]
+    failed = [r for r in rows if r["status"] in ("failed", "unstable")]
+    for r in invalid + failed:
+        print(f"{r['folder']}: {r['status']}: {r['message']}", file=sys.stderr)
+    counts = {s: sum(1 for r in rows if r["status"] == s)
+              for s in ("ran", "skipped", "unstable", "failed", "invalid")}
+    say("done: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n)
+        + f" -> {out / 'sweep.csv'}")
+    if invalid:
+        return EXIT_INVALID
+    return EXIT_FAILED if failed else EXIT_OK

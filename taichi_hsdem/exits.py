@@ -1,0 +1,20 @@
+"""Exit statuses and the argument parser every command line of the package shares.
+
+0 success; 1 the run failed (what to change is said); 2 the scene, the arguments
+or the output folder are invalid (one line per problem, no traceback, nothing
+written); 130 interrupted (Ctrl-C).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+EXIT_OK, EXIT_FAILED, EXIT_INVALID, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with the project's exit status for bad arguments (2, one line)."""
+
+    def error(self, message):
+        print(f"{self.prog}: {message}", file=sys.stderr)
+        sys.exit(EXIT_INVALID)
