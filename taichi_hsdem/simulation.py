@@ -129,6 +129,17 @@ class Simulation:
         self.results = [RealizationResult(seed=s) for s in self.seeds]
         self.last_escape_t = np.zeros(R)
         self.escaped_np = np.zeros(R, dtype=np.int64)
+        # per realization: the first check since its latest escape that found the
+        # arch static (_arch_static), NaN before one did: a clog's t_clog
+        self.arch_static_t = np.full(R, np.nan)
+        # escapees per realization and species counted at the checks, and the bodies
+        # the latest check left dead (escaped, not re-inserted): a body dies only by
+        # escaping and comes back only at a check, so the dead bodies beyond those
+        # are the escapes since
+        S = len(m.species)
+        self._species_onehot = np.eye(S, dtype=np.int64)[self.particles.species_np]
+        self.escaped_by_species = np.zeros((R, S), dtype=np.int64)
+        self.unfed_by_species = np.zeros((R, S), dtype=np.int64)
         self.u_ref = None   # per realization: mean speed through the constriction, first solve
         self.e0 = None
         self.history_overflows = 0
@@ -184,6 +195,8 @@ class Simulation:
         self._to_device(b.omega, 0.0 if omega is None else omega, (R, N))
         self._to_device(b.v, 0.0 if v is None else v, (R, N, 2))
         self._to_device(b.alive, 1 if alive is None else alive, (R, N), np.int32)
+        # bodies set dead here did not escape
+        self.unfed_by_species = self._dead_by_species(b.alive.to_numpy())
         self.history.clear()
         self.rebuild_neighbors()
         if self.fluid is not None:
@@ -230,6 +243,10 @@ class Simulation:
     def escaped(self) -> np.ndarray:
         """Bodies past the escape line so far, per realization (R,)."""
         return self.batch.escaped.to_numpy().astype(np.int64)
+
+    def _dead_by_species(self, alive) -> np.ndarray:
+        """Bodies not alive in ``alive`` (R, N), per realization and species (R, S)."""
+        return (np.asarray(alive) == 0).astype(np.int64) @ self._species_onehot
 
     # ------------------------------------------------------------------ stepping
     def step(self, n: int = 1):
@@ -314,7 +331,9 @@ class Simulation:
             self.flags[F_HISTORY_OVERFLOW] = 0
         batch = self.batch
         running, escaped, bad, overlap = integrate.read_status(batch, not final)
-        st = None
+        # every check reads the state: the arch test runs at each one (t_clog)
+        st = self.state() if running.any() and not final else None
+        dead = None if st is None else self._dead_by_species(st["alive"])
         changed = False
         for r in range(self.R):
             if not running[r]:
@@ -333,7 +352,6 @@ class Simulation:
                 reason = (f"overlap reached {overlap[r]:.3g} of a particle diameter "
                           f"(limit contact.overlap_limit = {sc.contact.overlap_limit:g})")
             if reason is None and not sc.fluid.enabled and not final:
-                st = st or self.state()
                 ke = self._kinetic_energy(st, r)
                 if self.e0 is None:
                     self.e0 = np.array([self._kinetic_energy(st, k) for k in range(self.R)])
@@ -352,23 +370,33 @@ class Simulation:
                 continue
             if res.clogged or final:
                 continue            # stop_at_clog = false: the stream goes on, the result is kept
-            if escaped[r] > self.escaped_np[r]:
+            went = escaped[r] > self.escaped_np[r]
+            if went:
                 self.escaped_np[r] = escaped[r]
                 self.last_escape_t[r] = self.t
+                self.arch_static_t[r] = np.nan     # an arch that holds forms after this
+            static = not went and self._arch_static(st, r)
+            if static and np.isnan(self.arch_static_t[r]):
+                self.arch_static_t[r] = self.t
             res.escapees = int(escaped[r])
-            if self.t - self.last_escape_t[r] >= sc.clog.window:
-                st = st or self.state()
-                if self._arch_static(st, r):
-                    res.clogged = True
-                    res.t_clog = float(self.last_escape_t[r])
-                    if sc.run.stop_at_clog:
-                        res.t_stop = self.t
-                        running[r] = 0
-                        changed = True
+            self.escaped_by_species[r] += dead[r] - self.unfed_by_species[r]
+            # a clog: no escape for clog.window and the arch static now. It formed
+            # when the checks first found it static after the last escape (the speed
+            # at the neck flickers about the threshold once it holds, so the latest
+            # static stretch would start late)
+            if static and self.t - self.last_escape_t[r] >= sc.clog.window:
+                res.clogged = True
+                res.t_clog = float(self.arch_static_t[r])
+                if sc.run.stop_at_clog:
+                    res.t_stop = self.t
+                    running[r] = 0
+                    changed = True
         if changed:
             batch.running.from_numpy(running.astype(np.int32))
-        if sc.feed.mode == "count" and not final:
-            self._feed(running)
+        if st is not None:
+            if sc.feed.mode == "count":
+                self._feed(running, st)
+            self.unfed_by_species = self._dead_by_species(st["alive"])
         return bool(running.any())
 
     def kinetic_energy(self) -> np.ndarray:
@@ -402,19 +430,19 @@ class Simulation:
             ref = m.d_min / self.scene.clog.window
         return speed < self.scene.clog.speed_fraction * ref
 
-    def _feed(self, running):
-        """Re-insert escaped particles at the inlet (feed.mode = "count")."""
+    def _feed(self, running, st):
+        """Re-insert escaped particles at the inlet (feed.mode = "count") of the
+        realizations ``running``, given the check's state ``st`` (:meth:`state`),
+        which is updated to what was fed."""
         m = self.model
         b = self.bodies
         spp = self.particles.species_np
-        alive = b.alive.to_numpy()
+        alive = st["alive"]
         if alive.all():
             return
-        xs = b.x.to_numpy().astype(float)
-        ths = b.theta.to_numpy().astype(float)
-        vs = b.v.to_numpy().astype(float)
+        xs, ths, vs = st["x"], st["theta"], st["v"]
         shapes = [s.shape for s in m.species]
-        moved = False
+        fed = np.zeros(self.R, dtype=bool)
         for r in range(self.R):
             if not running[r]:
                 continue
@@ -429,17 +457,20 @@ class Simulation:
                 vs[r, i] = 0.0
                 if self.fluid is not None:
                     self.fluid.forget_velocity(r, i)
-                alive[r, i] = 1
-                moved = True
-        if moved:
+                alive[r, i] = True
+                fed[r] = True
+        if fed.any():
             npr = backend.numpy_real()
             b.x.from_numpy(xs.astype(npr))
             b.theta.from_numpy(ths.astype(npr))
             b.v.from_numpy(vs.astype(npr))
             b.alive.from_numpy(alive.astype(np.int32))
             self.rebuild_neighbors()
-            if self.fluid is not None:            # the re-inserted bodies feel the flow at once
-                self.fluid.apply_forces(b, self.batch, self.particles, self.templates)
+            if self.fluid is not None:
+                # the re-inserted bodies feel the flow at once; the realizations not
+                # fed keep their held forces, as they would run alone
+                self.fluid.apply_forces(b, self.batch, self.particles, self.templates,
+                                        only=fed)
 
     # ------------------------------------------------------------------ run
     def run(self, progress=None, on_frame=None, frame_times=None, stop=None,
@@ -524,13 +555,26 @@ class Simulation:
         early), without changing them, so that a later :meth:`run` goes on."""
         sc = self.scene
         esc = self.batch.escaped.to_numpy()
+        st = self.state()
+        dead = self._dead_by_species(st["alive"])
         series = list(self.series)
         last_t = {r: t for r, t, _ in series}
         real = []
         for r, res in enumerate(self.results):
+            by_species = self.escaped_by_species[r]
+            t_last = float(self.last_escape_t[r])
+            if res.status == "ok" and not res.clogged:   # counted up to now
+                by_species = by_species + dead[r] - self.unfed_by_species[r]
+                if esc[r] > self.escaped_np[r]:
+                    t_last = self.t
             row = {"seed": res.seed, "escapees": res.escapees, "clogged": res.clogged,
                    "t_clog": res.t_clog, "status": res.status, "reason": res.reason,
-                   "t_stop": res.t_stop}
+                   "t_stop": res.t_stop,
+                   "escapees_by_species": (None if res.status == "unstable"
+                                           else [int(v) for v in by_species]),
+                   # the check that saw the last escape counted (None: none)
+                   "t_last_escape": (None if res.status == "unstable"
+                                     or not by_species.any() else t_last)}
             if res.status == "ok" and res.t_stop is None:
                 row["t_stop"] = self.t
                 if not res.clogged:
@@ -545,12 +589,12 @@ class Simulation:
         statistics = (stats.summarize([r["escapees"] for r in counted],
                                       [bool(r["clogged"]) for r in counted],
                                       n_unstable=n_unstable) if counted else None)
-        st = self.state()
         summary = {
             "scene": sc.source, "version": __version__, "arch": self.arch,
             "status": "interrupted" if self.interrupted else "complete",
             "dt": self.dt, "steps": self.steps, "t_end": sc.run.t_end, "t_reached": self.t,
             "wall_time_s": wall,
+            "species": [s.name for s in self.model.species],  # escapees_by_species' order
             "realizations": real,
             # the censoring-aware estimate of <s> (stats.summarize), not the plain mean
             "mean_escapees": None if statistics is None else statistics["mean_escapees"],

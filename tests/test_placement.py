@@ -211,3 +211,30 @@ def test_bad_arguments(channel):
         pl.place(0, channel, [disk], [1], (0.0, 20.0))
     with pytest.raises(ValueError, match="x0 must be < x1"):
         pl.count_for_fraction(0.2, channel, (5.0, 1.0), disk)
+
+
+@pytest.mark.parametrize("key", ["feed.region", "feed.inlet"])
+def test_a_feed_strip_past_the_constriction_is_refused(key, tmp_path, capsys):
+    """Bodies placed (or fed) downstream of the constriction would count as escapees
+    without crossing it, those past the escape line at the first step: the scene is
+    refused in one line naming the key, the constriction's exit and the escape line
+    (vani: exit at x = 0.003381, escape line half a diameter on, 0.003451); a strip
+    ending at the exit is accepted."""
+    from pathlib import Path
+
+    from taichi_hsdem import load_scene
+    from taichi_hsdem.cli import main
+    from taichi_hsdem.resolve import resolve
+
+    vani = str(Path(__file__).resolve().parents[1] / "scenes" / "vani_phi026.toml")
+    out = tmp_path / "out"
+    code = main([vani, "--set", f"{key}=[0.0025, 0.0036]", "--set", "run.t_end=1e-4",
+                 "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and not out.exists()
+    assert err[0].startswith(f"{vani}: {key}: [0.0025, 0.0036] reaches past the "
+                             "constriction's exit at x = 0.003381 (the escape line is at "
+                             "x = 0.003451)")
+    model = resolve(load_scene(vani, [f"{key}=[0.0025, 0.003381]"]), "x64")
+    assert (model.feed_region if key == "feed.region" else model.feed_inlet) == \
+        (0.0025, 0.003381)

@@ -1,4 +1,4 @@
-"""Fluid to particle and particle to fluid (MODEL.md sections 2 and 3).
+"""Fluid to particle and particle to fluid (docs/model.md sections 2 and 3).
 
 * Permeability: a fluid cell whose centre lies inside a particle (``phi <= 0``)
   takes the particle species' Kozeny-Carman permeability; other fluid cells keep
@@ -201,28 +201,33 @@ def body_drift(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarra
 @ti.kernel
 def pressure_forces(x: ti.types.ndarray(), th: ti.types.ndarray(),
                     alive: ti.types.ndarray(), running: ti.types.ndarray(),
+                    which: ti.types.ndarray(),
                     sp: ti.types.ndarray(), node_pos: ti.types.ndarray(),
                     node_area: ti.types.ndarray(), node_meta: ti.types.ndarray(),
                     pres: ti.types.ndarray(), active: ti.types.ndarray(),
                     f: ti.types.ndarray(), tau: ti.types.ndarray(), ox: float, oy: float,
                     h: float, gap: float, mode: ti.i32):
-    """Set ``f``, ``tau`` of every body to its pressure force and moment."""
+    """Set ``f``, ``tau`` of every body of the realizations with ``which[r] != 0``
+    to its pressure force and moment (0 where not running or not alive); the other
+    realizations' are left as they are."""
     for r, i in ti.ndrange(x.shape[0], x.shape[1]):
-        fsum = vec2(0.0, 0.0)
-        msum = 0.0
-        if running[r] != 0 and alive[r, i] != 0:
-            xi = x[r, i]
-            c = ti.cos(th[r, i])
-            s = ti.sin(th[r, i])
-            off = node_meta[sp[i], 0]
-            for k in range(node_meta[sp[i], 1]):
-                p = node_world(node_pos, off + k, xi, c, s)
-                sigma = sample_pressure(pres, active, r, p, ox, oy, h, mode)
-                df = -sigma * gap * rot(c, s, vec2(node_area[off + k, 0], node_area[off + k, 1]))
-                fsum += df
-                msum += cross(p - xi, df)
-        f[r, i] = fsum
-        tau[r, i] = msum
+        if which[r] != 0:
+            fsum = vec2(0.0, 0.0)
+            msum = 0.0
+            if running[r] != 0 and alive[r, i] != 0:
+                xi = x[r, i]
+                c = ti.cos(th[r, i])
+                s = ti.sin(th[r, i])
+                off = node_meta[sp[i], 0]
+                for k in range(node_meta[sp[i], 1]):
+                    p = node_world(node_pos, off + k, xi, c, s)
+                    sigma = sample_pressure(pres, active, r, p, ox, oy, h, mode)
+                    df = -sigma * gap * rot(c, s, vec2(node_area[off + k, 0],
+                                                       node_area[off + k, 1]))
+                    fsum += df
+                    msum += cross(p - xi, df)
+            f[r, i] = fsum
+            tau[r, i] = msum
 
 
 @ti.kernel
@@ -277,6 +282,9 @@ class FluidCoupling:
         self.w_src = np.zeros((n_real, n_part))
         self.vs = state._zeros((n_real, n_part), vector=True)
         self.ws = state._zeros((n_real, n_part))
+        # the realizations apply_forces sets: all of them, or those it is given
+        self._every = state.array(np.ones(n_real, dtype=np.int32), ti.i32)
+        self._chosen = state._zeros(n_real, ti.i32)
         # the implicit carried volume (fluid.flux_coupling = "implicit"): the
         # bodies' terms of the pressure solve, made on the first update
         self.implicit = bool(fl.particle_flux) and fl.flux_coupling == "implicit"
@@ -295,12 +303,19 @@ class FluidCoupling:
         self.solves = 0
         self.seconds = 0.0
 
-    def apply_forces(self, bodies, batch, particles, templates):
-        """Set every body's held fluid force and moment from the last pressure."""
+    def apply_forces(self, bodies, batch, particles, templates, only=None):
+        """Set every body's held fluid force and moment from the last pressure; with
+        ``only`` ((R,) bool), those of the realizations it flags alone, so that
+        re-inserting a body in one realization leaves the others' forces as a run
+        of theirs alone has them (batch equals alone)."""
         b, t = bodies, templates
-        pressure_forces(b.x, b.theta, b.alive, batch.running, particles.species, t.node_pos,
-                        t.node_area, t.node_meta, self.pres, self.active, b.f_fluid,
-                        b.tau_fluid, *self.grid, self.gap, self.sampling)
+        which = self._every
+        if only is not None:
+            which = self._chosen
+            which.from_numpy(np.asarray(only, dtype=np.int32))
+        pressure_forces(b.x, b.theta, b.alive, batch.running, which, particles.species,
+                        t.node_pos, t.node_area, t.node_meta, self.pres, self.active,
+                        b.f_fluid, b.tau_fluid, *self.grid, self.gap, self.sampling)
 
     def forget_velocity(self, r: int, i: int):
         """Body ``i`` of realization ``r`` was re-inserted: it carries no flux yet."""

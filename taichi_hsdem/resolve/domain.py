@@ -84,11 +84,23 @@ def _cell_for(area_bytes: float) -> float:
 
 
 def _check_feed(res: _Resolution, geom: wl.Geometry, key: str, strip, d_max: float):
-    """A feed strip must lie in the channel and hold fluid a particle fits in."""
+    """A feed strip must lie in the channel, end upstream of the constriction's exit
+    and hold fluid a particle fits in."""
     x0, x1 = strip
     if x1 <= geom.x_min or x0 >= geom.x_max:
         res.bad(key, f"[{x0:g}, {x1:g}] lies outside the channel, which spans x = "
                      f"[{geom.x_min:g}, {geom.x_max:g}]")
+        return
+    # A body centred downstream of the constriction would count as an escapee
+    # without having crossed it: at the first step when past the escape line. The
+    # slack lets the exit as the message prints it (6 digits) through.
+    if x1 > geom.constriction_x1 + 1e-5 * max(abs(geom.x_min), abs(geom.x_max)):
+        # (resolve records the escape offset before it checks the feed strips)
+        x_escape = geom.constriction_x1 + res.values["geometry.escape_offset"]
+        res.bad(key, f"[{x0:g}, {x1:g}] reaches past the constriction's exit at x = "
+                     f"{geom.constriction_x1:g} (the escape line is at x = {x_escape:g}): "
+                     f"particles placed there would count as escapees without crossing "
+                     f"it; end the strip at x <= {geom.constriction_x1:g}")
         return
     lo, hi = max(x0, geom.x_min), min(x1, geom.x_max)
     if wl.fluid_area(geom, lo, hi) < 0.25 * math.pi * d_max ** 2:
@@ -236,7 +248,7 @@ def resolve_particle_flux(scene: Scene, arch: str, res: _Resolution) -> Scene:
         res.notes["fluid.particle_flux"] = (
             "true: the particles carry their volume, so a stream runs at the fluid's speed "
             "(docs/scene.md, Carried volume)" if carried else
-            "false: particles as fixed obstacles in each solve (MODEL.md, the paper's "
+            "false: particles as fixed obstacles in each solve (docs/model.md, the paper's "
             "model); the imposed flow squeezes round them and a stream outruns the fluid "
             "(tools/stream_rate.py)")
         if auto:
