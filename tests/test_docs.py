@@ -3,12 +3,13 @@ ones generated from the keys, every relative link resolves, every file, command
 flag and `path: function` pointer the documents name exists, and nothing points
 outside the repository."""
 import argparse
+import importlib
 import re
 from pathlib import Path
 
 import pytest
 
-from taichi_hsdem.cli import _parser
+from taichi_hsdem.cli import COMMANDS, _parser
 from taichi_hsdem.scene import docgen
 from taichi_hsdem.scene.keys import SECTIONS, SpeciesConfig, key_specs
 from taichi_hsdem.scene.load import Scene
@@ -146,13 +147,17 @@ def _indented_blocks(text: str) -> list[list[str]]:
 
 @pytest.mark.parametrize("doc", DOCS, ids=_name)
 def test_command_flags_exist(doc):
-    parser = _parser()
     text = _text(doc)
     bad = []
     for tail in _commands(text, "python -m taichi_hsdem "):
         words = tail.split()
         if words and words[0].startswith("."):      # python -m taichi_hsdem.scene.docgen
             continue
+        parser = _parser()
+        if words and words[0] in COMMANDS:          # a study's own command line
+            module = importlib.import_module(f"taichi_hsdem.studies.{COMMANDS[words[0]]}")
+            parser, words = module._parser("x"), words[1:]
+        words = [w.split("|")[0] for w in words]    # a|b|c: alternatives, one parser
         flags = {w.split("=")[0] for w in re.findall(r"(?<![\w-])--[\w-]+=?", tail)}
         bad += [f for f in flags if f not in _options(parser, words)]
     assert not bad, bad

@@ -420,8 +420,7 @@ def draw(result, path, examples=6, tol=DEFAULT_TOL):
     plt.close(fig)
 
 
-def main(argv=None, prog: str = "python -m taichi_hsdem arches") -> int:
-    """Command line; exit 0 on success, 2 for invalid input."""
+def _parser(prog: str) -> Parser:
     p = Parser(prog=prog, description="The clogging arches of a finished figures folder.")
     p.add_argument("folder", help="the figure's --out folder")
     p.add_argument("--tol", type=float, default=DEFAULT_TOL,
@@ -430,8 +429,13 @@ def main(argv=None, prog: str = "python -m taichi_hsdem arches") -> int:
                    help=f"face-to-face: normals opposed within this many degrees "
                         f"(default {DEFAULT_ANGLE:g})")
     p.add_argument("--examples", type=int, default=6, help="arches drawn per point (default 6)")
+    return p
+
+
+def main(argv=None, prog: str = "python -m taichi_hsdem arches") -> int:
+    """Command line; exit 0 on success, 2 for invalid input."""
     try:
-        args = p.parse_args(argv)
+        args = _parser(prog).parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
     problems = []
