@@ -67,6 +67,18 @@ def write_summary(summary: dict, out: Path):
     atomic_write(out / "summary.json", json.dumps(json_safe(summary), indent=1) + "\n")
 
 
+def write_flow(flow, statuses, out: Path):
+    """``flow.csv``: realization,t,pressure_drop,flow_rate (Pa, m^3/s) at every
+    pressure solve; unstable realizations are left out."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["realization", "t", "pressure_drop", "flow_rate"])
+    for r, t, drop, q in flow:
+        if statuses[r] != "unstable":
+            w.writerow([r, repr(float(t)), repr(float(drop)), repr(float(q))])
+    atomic_write(out / "flow.csv", buf.getvalue())
+
+
 def write_series(series, statuses, out: Path):
     """``escapees.csv``: realization,t,escapees; unstable realizations are left out."""
     buf = io.StringIO()
@@ -79,7 +91,7 @@ def write_series(series, statuses, out: Path):
 
 
 #: Files (and folders) a run writes into its output folder.
-RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "summary.json", "video.mp4",
+RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "flow.csv", "summary.json", "video.mp4",
                 "escapees.png", "pmf.png", "series.pvd", "vtk", checkpoint.FILE)
 #: The list of the files the runs of this project wrote in a folder: only these
 #: are ever replaced or removed there.
@@ -221,8 +233,11 @@ class Staging:
         statuses = [r["status"] for r in result.summary["realizations"]]
         write_resolved_scene(result.scene, self.tmp, result.notes)
         write_series(result.series, statuses, self.tmp)
-        write_summary(result.summary, self.tmp)
         names = ["scene.resolved.toml", "escapees.csv", *extra]
+        if result.flow:
+            write_flow(result.flow, statuses, self.tmp)
+            names.insert(2, "flow.csv")
+        write_summary(result.summary, self.tmp)
         earlier = owned_files(self.out)
         kept = set(names) | {"summary.json", checkpoint.FILE}
         if self.continuing:

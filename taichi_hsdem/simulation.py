@@ -57,6 +57,7 @@ class Result:
     scene: Scene
     summary: dict
     series: list = field(default_factory=list)      # (realization, t, escapees)
+    flow: list = field(default_factory=list)        # (realization, t, pressure drop, Q)
     final: dict = field(default_factory=dict)       # numpy arrays (R, N, ...)
     notes: dict = field(default_factory=dict)       # what every "auto" chose, and why
 
@@ -144,6 +145,7 @@ class Simulation:
         self.e0 = None
         self.history_overflows = 0
         self.series: list = []          # (realization, t, escapees) rows so far
+        self.flow: list = []            # (realization, t, pressure drop, flow rate) per solve
         self.next_series = 0.0          # time of the next row
         self.any_running = True
         self.interrupted = False
@@ -311,9 +313,33 @@ class Simulation:
         set); refresh the held fluid forces."""
         info = self.fluid.update(self.bodies, self.batch, self.particles, self.templates,
                                  self.materials, force=force)
-        if info is not None and self.u_ref is None:
+        if info is None:
+            return
+        if self.u_ref is None:
             # mean fluid speed through the constriction of the initial channel
             self.u_ref = np.abs(info.flux_out) / self.model.geometry.constriction_width
+        self._record_flow(info)
+
+    def _record_flow(self, info):
+        """A ``flow`` row per running realization at each pressure solve: the
+        pressure drop across the domain and the flow rate leaving it (m^3/s: the
+        outflow per unit depth times the gap). Under a pressure inlet the drop is
+        the imposed ``p_in - p_out``; under a flow-rate inlet it is what a syringe
+        pump's sensor reads: the mean pressure on the inlet, extrapolated from the
+        first two cell columns to the boundary (exact for a linear pressure), less
+        ``p_out``."""
+        fl = self.scene.fluid
+        q = np.asarray(info.flux_out, dtype=float) * fl.gap
+        if fl.bc == "pressure":
+            drop = np.full(self.R, fl.p_in - fl.p_out)
+        else:
+            p = self.fluid.pressure
+            edge = 1.5 * p[:, 0, :] - 0.5 * p[:, 1, :]      # NaN where either is wall
+            drop = np.array([np.mean(e[np.isfinite(e)]) if np.isfinite(e).any() else np.nan
+                             for e in edge]) - fl.p_out
+        running = self.batch.running.to_numpy()
+        self.flow += [(r, self.t, float(drop[r]), float(q[r]))
+                      for r in range(self.R) if running[r]]
 
     # ------------------------------------------------------------------ checks
     def _check(self, final: bool = False):
@@ -612,5 +638,5 @@ class Simulation:
                  "alive": st["alive"][r].tolist(), "species": st["species"].tolist()}
                 for r in range(self.R)],
         }
-        return Result(scene=sc, summary=summary, series=series, final=st,
-                      notes=dict(self.model.notes))
+        return Result(scene=sc, summary=summary, series=series, flow=list(self.flow),
+                      final=st, notes=dict(self.model.notes))

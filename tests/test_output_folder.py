@@ -203,3 +203,58 @@ def test_ctrl_c_while_the_results_are_written_lets_them_all_be_written(
     manifest = set(json.loads((out / output.MANIFEST).read_text())["files"])
     assert manifest == {p.name for p in out.iterdir() if not p.name.startswith(".")}
     assert {"summary.json", "escapees.csv", "scene.resolved.toml", "checkpoint.npz"} <= manifest
+
+
+CHANNEL = """
+name = "channel"
+units = "dimensionless"
+[run]
+t_end = 0.01
+[fluid]
+viscosity = 1.0
+gap = 1.2
+particle_flux = false
+update_interval = 2
+{bc}
+[geometry]
+kind = "polygon"
+outline = [[0.0, -1.5], [12.0, -1.5], [12.0, 1.5], [0.0, 1.5]]
+constriction_x = 11.0
+[[particles]]
+shape = "circle"
+diameter = 1.0
+positions = [[6.0, 0.0]]
+density = 1.0
+[feed]
+mode = "none"
+"""
+
+
+def test_flow_csv_reads_the_drop_a_pump_would_at_the_flow_the_pressure_inlet_gave(tmp_path,
+                                                                                  capsys):
+    """A disk held as an obstacle in a straight channel at t = 0, once under
+    p_in - p_out = 100 and once under the flow rate that gave: the finite-volume
+    system is then the same linear one, so the flow-rate run's pressure drop (the
+    inlet column extrapolated to the boundary; the pressure is linear there, 6 d
+    upstream of the disk, so the two-column extrapolation is exact) is the 100
+    imposed, to the solve's accuracy (solver_tol 1e-6 against a permeability
+    contrast of 1e3: 1e-4 allowed, 4e-6 measured), and its flow rate column is the
+    one prescribed, in m^3/s (per unit depth times the gap)."""
+    import csv as csvmod
+    runs = {}
+    for name, bc in (("p", 'bc = "pressure"\np_in = 200.0\np_out = 100.0'), ("q", None)):
+        if bc is None:
+            bc = f'bc = "flow_rate"\nflow_rate = {runs["p"][0][3]!r}\np_out = 100.0'
+        scene = tmp_path / f"{name}.toml"
+        scene.write_text(CHANNEL.format(bc=bc))
+        assert main([str(scene), "--out", str(tmp_path / name), "--quiet"]) == 0
+        with open(tmp_path / name / "flow.csv") as fh:
+            rows = list(csvmod.reader(fh))
+        assert rows[0] == ["realization", "t", "pressure_drop", "flow_rate"]
+        runs[name] = [[float(v) for v in row] for row in rows[1:]]
+        solves = json.loads((tmp_path / name / "summary.json").read_text())["fluid"]["solves"]
+        assert len(runs[name]) == solves >= 2                 # a row at every solve
+    p0, q0 = runs["p"][0], runs["q"][0]
+    assert p0[1] == q0[1] == 0.0 and p0[2] == 100.0
+    assert q0[2] == pytest.approx(100.0, rel=1e-4)
+    assert q0[3] == pytest.approx(p0[3], rel=1e-6)
