@@ -41,6 +41,8 @@ pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
 from ..backend import ti  # sets the environment before Taichi loads
 from .kmath import cross, node_world, rot, rot_t, spin, template_sample, wall_sample
 from .layout import BAD_PASSED, F_HISTORY_OVERFLOW, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
+from .neighbors import NEIGHBORS
+from .state import Batch, Bodies, Materials, Particles, ShearHistory, Templates, WallGrid
 
 vec2 = ti.math.vec2
 
@@ -143,23 +145,30 @@ def store_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.templat
 
 
 @ti.kernel
-def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray(),
-                w: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray(),
-                alive: ti.types.ndarray(), running: ti.types.ndarray(),
-                bad: ti.types.ndarray(), max_overlap: ti.types.ndarray(),
-                nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
-                sp: ti.types.ndarray(), mass: ti.types.ndarray(), deq: ti.types.ndarray(),
-                rb: ti.types.ndarray(), pair: ti.types.ndarray(), wallp: ti.types.ndarray(),
-                ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(),
-                ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
-                node_pos: ti.types.ndarray(), node_meta: ti.types.ndarray(),
-                inside: ti.types.ndarray(),
-                wall: ti.types.ndarray(), wall_grad: ti.types.ndarray(),
-                wall_shape: ti.types.ndarray(), wall_ox: float, wall_oy: float, wall_h: float,
-                hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
-                hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(), slots: ti.template(),
-                flags: ti.types.ndarray(), dt: float, normalize: ti.i32):
-    """Add every contact force and moment acting on each body (level-set path).
+def ls_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pack,
+                materials: Materials.Pack, templates: Templates.Pack, walls: WallGrid.Pack,
+                history: ShearHistory.Pack, neighbors: NEIGHBORS, flags: ti.types.ndarray(),
+                slots: ti.template(), dt: float, normalize: ti.i32):
+    """Add every contact force and moment acting on each body (level-set path,
+    :func:`ls_force`)."""
+    for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
+        if batch.running[r] == 0 or bodies.alive[r, i] == 0:
+            continue
+        f, m, deepest = ls_force(bodies, batch, particles, materials, templates, walls, history,
+                                 neighbors, flags, slots, dt, normalize, r, i)
+        bodies.force[r, i] += f
+        bodies.torque[r, i] += m
+        ti.atomic_max(batch.max_overlap[r], deepest)
+
+
+@ti.func
+def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template(),
+             materials: ti.template(), templates: ti.template(), walls: ti.template(),
+             history: ti.template(), neighbors: ti.template(), flags: ti.template(),
+             slots: ti.template(), dt, normalize, r, i):
+    """Contact force, moment and deepest overlap (fraction of d_eq) on body ``i``
+    of realization ``r`` from its listed neighbours and the walls; writes its new
+    shear history.
 
     A body whose inside point (the deepest point of its template, ``inside``:
     not its centre of mass, which an L-shape's notch holds) lies inside a
@@ -172,229 +181,225 @@ def ls_contacts(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarr
     Pairs whose bounding circles do not meet are skipped (no node of one can be
     inside the other), and so is a node outside the other body's bounding circle.
     """
-    n_part = x.shape[1]
-    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
-        if running[r] == 0 or alive[r, i] == 0:
+    n_part = bodies.x.shape[1]
+    ti_ = particles.species[i]
+    xi = bodies.x[r, i]
+    ci = ti.cos(bodies.theta[r, i])
+    si = ti.sin(bodies.theta[r, i])
+    vi = bodies.v[r, i]
+    wi = bodies.omega[r, i]
+    noff_i = templates.node_meta[ti_, 0]
+    nn_i = templates.node_meta[ti_, 1]
+    pole_i = node_world(templates.inside, ti_, xi, ci, si)
+    rb_i = particles.bounding_radius[i]
+    for k in range(nn_i):
+        for s in ti.static(range(slots)):
+            history.partners_new[r, i, k, s] = 0
+    ftot = vec2(0.0, 0.0)
+    mtot = 0.0
+    deepest = 0.0
+    for q in range(neighbors.nbr_n[r, i]):
+        j = neighbors.nbr[r, i, q]
+        if bodies.alive[r, j] == 0:
             continue
-        ti_ = sp[i]
-        xi = x[r, i]
-        ci = ti.cos(th[r, i])
-        si = ti.sin(th[r, i])
-        vi = v[r, i]
-        wi = w[r, i]
-        noff_i = node_meta[ti_, 0]
-        nn_i = node_meta[ti_, 1]
-        pole_i = node_world(inside, ti_, xi, ci, si)
-        rb_i = rb[i]
+        tj = particles.species[j]
+        xj = bodies.x[r, j]
+        rb_j = particles.bounding_radius[j]
+        if (xi - xj).norm() >= rb_i + rb_j:
+            continue
+        cj = ti.cos(bodies.theta[r, j])
+        sj = ti.sin(bodies.theta[r, j])
+        vj = bodies.v[r, j]
+        wj = bodies.omega[r, j]
+        a, b = particles.species[i], particles.species[j]
+        kn = materials.pair[a, b, PAIR_KN]
+        ks = materials.pair[a, b, PAIR_KS]
+        mu = materials.pair[a, b, PAIR_MU]
+        mi = particles.mass[i]
+        mj = particles.mass[j]
+        meff = mi * mj / (mi + mj)
+        gamma = materials.pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
+        held, _ = template_sample(templates.ls_phi, templates.ls_grad, templates.ls_meta,
+                                  templates.ls_geo, tj, rot_t(cj, sj, pole_i - xj))
+        if held < 0.0:
+            ti.atomic_or(batch.bad[r], BAD_PASSED)
+        # (a) nodes of i inside j: force on i, history owned by i.
+        fa = vec2(0.0, 0.0)
+        ma = 0.0
+        na = 0
         for k in range(nn_i):
-            for s in ti.static(range(slots)):
-                hp_new[r, i, k, s] = 0
-        ftot = vec2(0.0, 0.0)
-        mtot = 0.0
-        deepest = 0.0
-        for q in range(nbr_n[r, i]):
-            j = nbr[r, i, q]
-            if alive[r, j] == 0:
+            p = node_world(templates.node_pos, noff_i + k, xi, ci, si)
+            if (p - xj).norm() >= rb_j:
                 continue
-            tj = sp[j]
-            xj = x[r, j]
-            rb_j = rb[j]
-            if (xi - xj).norm() >= rb_i + rb_j:
-                continue
-            cj = ti.cos(th[r, j])
-            sj = ti.sin(th[r, j])
-            vj = v[r, j]
-            wj = w[r, j]
-            a, b = sp[i], sp[j]
-            kn = pair[a, b, PAIR_KN]
-            ks = pair[a, b, PAIR_KS]
-            mu = pair[a, b, PAIR_MU]
-            meff = mass[i] * mass[j] / (mass[i] + mass[j])
-            gamma = pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
-            held, _ = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, tj, rot_t(cj, sj, pole_i - xj))
-            if held < 0.0:
-                ti.atomic_or(bad[r], BAD_PASSED)
-            # (a) nodes of i inside j: force on i, history owned by i.
-            fa = vec2(0.0, 0.0)
-            ma = 0.0
-            na = 0
-            for k in range(nn_i):
-                p = node_world(node_pos, noff_i + k, xi, ci, si)
-                if (p - xj).norm() >= rb_j:
-                    continue
-                qb = rot_t(cj, sj, p - xj)
-                phi, g = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, tj, qb)
-                if phi < 0.0 and g.norm() > 0.0:
-                    nrm = rot(cj, sj, g.normalized())
-                    u = (vi + spin(wi, p - xi)) - (vj + spin(wj, p - xj))
-                    fs_old = find_shear(hp_old, hs_old, r, i, k, slots, j)
-                    fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
-                    store_shear(hp_new, hs_new, r, i, k, slots, j, fs, flags)
-                    fa += fn + fs
-                    ma += cross(p - xi, fn + fs)
-                    na += 1
-                    deepest = ti.max(deepest, -phi / deq[i])
-            # (b) nodes of j inside i: the reaction on i, with j's (old) history.
-            fb = vec2(0.0, 0.0)
-            mb = 0.0
-            nb = 0
-            noff_j = node_meta[tj, 0]
-            for k in range(node_meta[tj, 1]):
-                p = node_world(node_pos, noff_j + k, xj, cj, sj)
-                if (p - xi).norm() >= rb_i:
-                    continue
-                qb = rot_t(ci, si, p - xi)
-                phi, g = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, ti_, qb)
-                if phi < 0.0 and g.norm() > 0.0:
-                    nrm = rot(ci, si, g.normalized())
-                    u = (vj + spin(wj, p - xj)) - (vi + spin(wi, p - xi))
-                    fs_old = find_shear(hp_old, hs_old, r, j, k, slots, i)
-                    fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
-                    fb -= fn + fs
-                    mb -= cross(p - xi, fn + fs)
-                    nb += 1
-            if normalize != 0:
-                if na > 0:
-                    fa /= na
-                    ma /= na
-                if nb > 0:
-                    fb /= nb
-                    mb /= nb
-            # Both directions estimate the same contact: average them when both see
-            # it, so a pair is not twice as stiff as a body against a wall.
-            both = 0.5 if na > 0 and nb > 0 else 1.0
-            ftot += both * (fa + fb)
-            mtot += both * (ma + mb)
-        # Walls: nodes of i against the static wall level set.
-        a = sp[i]
-        kn = wallp[a, PAIR_KN]
-        ks = wallp[a, PAIR_KS]
-        mu = wallp[a, PAIR_MU]
-        gamma = wallp[a, PAIR_CE] * ti.sqrt(kn * mass[i])
-        fw = vec2(0.0, 0.0)
-        mw = 0.0
-        nw = 0
-        places = _no_places()
-        for k in range(nn_i):
-            p = node_world(node_pos, noff_i + k, xi, ci, si)
-            phi, g = wall_sample(wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h, p)
-            hit = False
-            fm = ti.Vector([0.0, 0.0, 0.0])
+            qb = rot_t(cj, sj, p - xj)
+            phi, g = template_sample(templates.ls_phi, templates.ls_grad,
+                                     templates.ls_meta, templates.ls_geo, tj, qb)
             if phi < 0.0 and g.norm() > 0.0:
-                nrm = g.normalized()
-                u = vi + spin(wi, p - xi)
-                fs_old = find_shear(hp_old, hs_old, r, i, k, slots, n_part)
+                nrm = rot(cj, sj, g.normalized())
+                u = (vi + spin(wi, p - xi)) - (vj + spin(wj, p - xj))
+                fs_old = find_shear(history.partners_old, history.shear_old, r, i, k,
+                                    slots, j)
                 fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
-                store_shear(hp_new, hs_new, r, i, k, slots, n_part, fs, flags)
-                fc = fn + fs
-                mc = cross(p - xi, fc)
-                fw += fc
-                mw += mc
-                nw += 1
-                deepest = ti.max(deepest, -phi / deq[i])
-                hit = True
-                fm = ti.Vector([fc[0], fc[1], mc])
-            places = _place_step(places, k, hit, fm)
-        if normalize != 0 and nw > 0:
-            total, count = _place_total(places)
-            if count > 1:   # touching the walls in several places: each its own contact
-                fw = vec2(total[0], total[1])
-                mw = total[2]
-            else:
-                fw /= nw
-                mw /= nw
-        f[r, i] += ftot + fw
-        tau[r, i] += mtot + mw
-        ti.atomic_max(max_overlap[r], deepest)
+                store_shear(history.partners_new, history.shear_new, r, i, k, slots, j,
+                            fs, flags)
+                fa += fn + fs
+                ma += cross(p - xi, fn + fs)
+                na += 1
+                deepest = ti.max(deepest, -phi / particles.d_eq[i])
+        # (b) nodes of j inside i: the reaction on i, with j's (old) history.
+        fb = vec2(0.0, 0.0)
+        mb = 0.0
+        nb = 0
+        noff_j = templates.node_meta[tj, 0]
+        for k in range(templates.node_meta[tj, 1]):
+            p = node_world(templates.node_pos, noff_j + k, xj, cj, sj)
+            if (p - xi).norm() >= rb_i:
+                continue
+            qb = rot_t(ci, si, p - xi)
+            phi, g = template_sample(templates.ls_phi, templates.ls_grad,
+                                     templates.ls_meta, templates.ls_geo, ti_, qb)
+            if phi < 0.0 and g.norm() > 0.0:
+                nrm = rot(ci, si, g.normalized())
+                u = (vj + spin(wj, p - xj)) - (vi + spin(wi, p - xi))
+                fs_old = find_shear(history.partners_old, history.shear_old, r, j, k,
+                                    slots, i)
+                fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
+                fb -= fn + fs
+                mb -= cross(p - xi, fn + fs)
+                nb += 1
+        if normalize != 0:
+            if na > 0:
+                fa /= na
+                ma /= na
+            if nb > 0:
+                fb /= nb
+                mb /= nb
+        # Both directions estimate the same contact: average them when both see
+        # it, so a pair is not twice as stiff as a body against a wall.
+        both = 0.5 if na > 0 and nb > 0 else 1.0
+        ftot += both * (fa + fb)
+        mtot += both * (ma + mb)
+    # Walls: nodes of i against the static wall level set.
+    a = particles.species[i]
+    kn = materials.wall[a, PAIR_KN]
+    ks = materials.wall[a, PAIR_KS]
+    mu = materials.wall[a, PAIR_MU]
+    gamma = materials.wall[a, PAIR_CE] * ti.sqrt(kn * particles.mass[i])
+    fw = vec2(0.0, 0.0)
+    mw = 0.0
+    nw = 0
+    places = _no_places()
+    for k in range(nn_i):
+        p = node_world(templates.node_pos, noff_i + k, xi, ci, si)
+        phi, g = wall_sample(walls, p)
+        hit = False
+        fm = ti.Vector([0.0, 0.0, 0.0])
+        if phi < 0.0 and g.norm() > 0.0:
+            nrm = g.normalized()
+            u = vi + spin(wi, p - xi)
+            fs_old = find_shear(history.partners_old, history.shear_old, r, i, k, slots,
+                                n_part)
+            fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
+            store_shear(history.partners_new, history.shear_new, r, i, k, slots, n_part,
+                        fs, flags)
+            fc = fn + fs
+            mc = cross(p - xi, fc)
+            fw += fc
+            mw += mc
+            nw += 1
+            deepest = ti.max(deepest, -phi / particles.d_eq[i])
+            hit = True
+            fm = ti.Vector([fc[0], fc[1], mc])
+        places = _place_step(places, k, hit, fm)
+    if normalize != 0 and nw > 0:
+        total, count = _place_total(places)
+        if count > 1:   # touching the walls in several places: each its own contact
+            fw = vec2(total[0], total[1])
+            mw = total[2]
+        else:
+            fw /= nw
+            mw /= nw
+    return ftot + fw, mtot + mw, deepest
 
 
 @ti.kernel
-def disk_contacts(x: ti.types.ndarray(), v: ti.types.ndarray(), w: ti.types.ndarray(),
-                  f: ti.types.ndarray(), tau: ti.types.ndarray(), alive: ti.types.ndarray(),
-                  running: ti.types.ndarray(), max_overlap: ti.types.ndarray(),
-                  nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(),
-                  sp: ti.types.ndarray(), rad: ti.types.ndarray(), mass: ti.types.ndarray(),
-                  pair: ti.types.ndarray(), wallp: ti.types.ndarray(), wall: ti.types.ndarray(),
-                  wall_grad: ti.types.ndarray(), wall_shape: ti.types.ndarray(),
-                  wall_ox: float, wall_oy: float, wall_h: float,
-                  hp_old: ti.types.ndarray(), hs_old: ti.types.ndarray(),
-                  hp_new: ti.types.ndarray(), hs_new: ti.types.ndarray(), slots: ti.template(),
-                  flags: ti.types.ndarray(), dt: float):
+def disk_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pack,
+                  materials: Materials.Pack, walls: WallGrid.Pack, history: ShearHistory.Pack,
+                  neighbors: NEIGHBORS, flags: ti.types.ndarray(), slots: ti.template(),
+                  dt: float):
     """Add every contact force and moment on each disk (analytic fast path).
 
     The pair is evaluated by both disks, each keeping its own copy of the shear
     history; the two copies stay exact mirrors because every operation is
     antisymmetric in (i, j).
     """
-    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
-        if running[r] == 0 or alive[r, i] == 0:
+    for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
+        if batch.running[r] == 0 or bodies.alive[r, i] == 0:
             continue
-        ftot, mtot, deepest = disk_force(x, v, w, alive, nbr, nbr_n, sp, rad, mass, pair,
-                                         wallp, wall, wall_grad, wall_shape, wall_ox, wall_oy,
-                                         wall_h, hp_old, hs_old, hp_new, hs_new, slots, flags,
-                                         dt, r, i)
-        f[r, i] += ftot
-        tau[r, i] += mtot
-        ti.atomic_max(max_overlap[r], deepest)
+        ftot, mtot, deepest = disk_force(
+            bodies, particles, materials, walls, neighbors, history.partners_old,
+            history.shear_old, history.partners_new, history.shear_new, slots, flags, dt, r, i)
+        bodies.force[r, i] += ftot
+        bodies.torque[r, i] += mtot
+        ti.atomic_max(batch.max_overlap[r], deepest)
 
 
 @ti.func
-def disk_force(x: ti.template(), v: ti.template(), w: ti.template(), alive: ti.template(),
-               nbr: ti.template(), nbr_n: ti.template(), sp: ti.template(),
-               rad: ti.template(), mass: ti.template(), pair: ti.template(),
-               wallp: ti.template(), wall: ti.template(), wall_grad: ti.template(),
-               wall_shape: ti.template(), wall_ox, wall_oy, wall_h,
-               hp_old: ti.template(), hs_old: ti.template(), hp_new: ti.template(),
-               hs_new: ti.template(), slots: ti.template(), flags: ti.template(), dt, r, i):
+def disk_force(bodies: ti.template(), particles: ti.template(), materials: ti.template(),
+               walls: ti.template(), neighbors: ti.template(), hp_old: ti.template(),
+               hs_old: ti.template(), hp_new: ti.template(), hs_new: ti.template(),
+               slots: ti.template(), flags: ti.template(), dt, r, i):
     """Contact force, moment and deepest overlap (fraction of d) on disk ``i`` of
     realization ``r`` from its listed neighbours and the walls; writes its new
     shear history."""
-    n_part = x.shape[1]
+    n_part = bodies.x.shape[1]
     for s in ti.static(range(slots)):
         hp_new[r, i, 0, s] = 0
-    xi = x[r, i]
-    vi = v[r, i]
-    wi = w[r, i]
-    ri = rad[i]
+    xi = bodies.x[r, i]
+    vi = bodies.v[r, i]
+    wi = bodies.omega[r, i]
+    ri = particles.disk_radius[i]
     ftot = vec2(0.0, 0.0)
     mtot = 0.0
     deepest = 0.0
-    for q in range(nbr_n[r, i]):
-        j = nbr[r, i, q]
-        if alive[r, j] == 0:
+    for q in range(neighbors.nbr_n[r, i]):
+        j = neighbors.nbr[r, i, q]
+        if bodies.alive[r, j] == 0:
             continue
-        d = xi - x[r, j]
+        d = xi - bodies.x[r, j]
         dist = d.norm()
-        depth = ri + rad[j] - dist
+        depth = ri + particles.disk_radius[j] - dist
         if depth > 0.0 and dist > 0.0:
             nrm = d / dist
-            a, b = sp[i], sp[j]
-            kn = pair[a, b, PAIR_KN]
-            meff = mass[i] * mass[j] / (mass[i] + mass[j])
-            gamma = pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
+            a, b = particles.species[i], particles.species[j]
+            kn = materials.pair[a, b, PAIR_KN]
+            mi = particles.mass[i]
+            mj = particles.mass[j]
+            meff = mi * mj / (mi + mj)
+            gamma = materials.pair[a, b, PAIR_CE] * ti.sqrt(kn * meff)
             # contact point half-way through the overlap
             ra = -(ri - 0.5 * depth) * nrm
-            rb = (rad[j] - 0.5 * depth) * nrm
-            u = (vi + spin(wi, ra)) - (v[r, j] + spin(w[r, j], rb))
+            rb = (particles.disk_radius[j] - 0.5 * depth) * nrm
+            u = (vi + spin(wi, ra)) - (bodies.v[r, j] + spin(bodies.omega[r, j], rb))
             fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, j)
-            fn, fs = contact_law(depth, nrm, u, fs_old, kn, pair[a, b, PAIR_KS],
-                                 pair[a, b, PAIR_MU], gamma, dt)
+            fn, fs = contact_law(depth, nrm, u, fs_old, kn, materials.pair[a, b, PAIR_KS],
+                                 materials.pair[a, b, PAIR_MU], gamma, dt)
             store_shear(hp_new, hs_new, r, i, 0, slots, j, fs, flags)
             ftot += fn + fs
             mtot += cross(ra, fs)
             deepest = ti.max(deepest, depth / (2.0 * ri))
-    phi, g = wall_sample(wall, wall_grad, wall_shape, wall_ox, wall_oy, wall_h, xi)
+    phi, g = wall_sample(walls, xi)
     depth = ri - phi
     if depth > 0.0 and g.norm() > 0.0:
         nrm = g.normalized()
-        a = sp[i]
-        kn = wallp[a, PAIR_KN]
-        gamma = wallp[a, PAIR_CE] * ti.sqrt(kn * mass[i])
+        a = particles.species[i]
+        kn = materials.wall[a, PAIR_KN]
+        gamma = materials.wall[a, PAIR_CE] * ti.sqrt(kn * particles.mass[i])
         ra = -(ri - 0.5 * depth) * nrm
         u = vi + spin(wi, ra)
         fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, n_part)
-        fn, fs = contact_law(depth, nrm, u, fs_old, kn, wallp[a, PAIR_KS],
-                             wallp[a, PAIR_MU], gamma, dt)
+        fn, fs = contact_law(depth, nrm, u, fs_old, kn, materials.wall[a, PAIR_KS],
+                             materials.wall[a, PAIR_MU], gamma, dt)
         store_shear(hp_new, hs_new, r, i, 0, slots, n_part, fs, flags)
         ftot += fn + fs
         mtot += cross(ra, fs)
@@ -408,18 +413,10 @@ def add_forces(bodies, batch, particles, materials, templates, walls, history, n
     analytic disk law when ``disks`` (every particle a circle), else the level-set
     node law; writes the new shear history (``history.new``) and the deepest
     overlap of each realization (``batch.max_overlap``)."""
-    (hp_old, hs_old), (hp_new, hs_new) = history.old, history.new
-    b, p, m, wg, nl = bodies, particles, materials, walls, neighbors
-    wall = (wg.phi, wg.grad, wg.shape, wg.origin[0], wg.origin[1], wg.spacing)
+    packs = (bodies.pack(), batch.pack(), particles.pack(), materials.pack())
     if disks:
-        disk_contacts(b.x, b.v, b.omega, b.force, b.torque, b.alive, batch.running,
-                      batch.max_overlap, nl.nbr, nl.nbr_n, p.species, p.radius, p.mass,
-                      m.pair, m.wall, *wall, hp_old, hs_old, hp_new, hs_new, history.slots,
-                      flags, dt)
+        disk_contacts(*packs, walls.pack(), history.pack(), neighbors.pack(), flags,
+                      history.slots, dt)
     else:
-        t = templates
-        ls_contacts(b.x, b.theta, b.v, b.omega, b.force, b.torque, b.alive, batch.running,
-                    batch.bad, batch.max_overlap, nl.nbr, nl.nbr_n, p.species, p.mass,
-                    p.d_eq, p.bounding_radius, m.pair, m.wall, t.ls_phi, t.ls_grad, t.ls_meta,
-                    t.ls_geo, t.node_pos, t.node_meta, t.inside, *wall, hp_old, hs_old, hp_new, hs_new,
-                    history.slots, flags, dt, int(normalize))
+        ls_contacts(*packs, templates.pack(), walls.pack(), history.pack(), neighbors.pack(),
+                    flags, history.slots, dt, int(normalize))

@@ -3,7 +3,7 @@ rotations, the 2D cross product, the velocity of a point of a spinning body, and
 the bilinear sampling of a level-set grid (a template's or the walls')."""
 
 from ..backend import ti  # sets the environment before Taichi loads
-from .layout import OUTSIDE
+from .layout import GEO_H, GEO_OX, GEO_OY, OUTSIDE
 
 vec2 = ti.math.vec2
 
@@ -69,15 +69,16 @@ def template_sample(ls_phi: ti.template(), ls_grad: ti.template(), ls_meta: ti.t
     """Level set of template ``t`` and its gradient at body-frame point ``q``
     (``ls_meta[t]``: offset, nx, ny; ``ls_geo[t]``: origin x, origin y, spacing)."""
     phi, g = grid_sample(ls_phi, ls_grad, ls_meta[t, 0], ls_meta[t, 1], ls_meta[t, 2],
-                         ls_geo[t, 0], ls_geo[t, 1], ls_geo[t, 2], q)
+                         ls_geo[t, GEO_OX], ls_geo[t, GEO_OY], ls_geo[t, GEO_H], q)
     return phi, g
 
 
 @ti.func
-def wall_sample(wall: ti.template(), wall_grad: ti.template(), wall_shape: ti.template(),
-                ox, oy, h, p):
-    """Wall level set (positive in the fluid) and its gradient at world point ``p``."""
-    phi, g = grid_sample(wall, wall_grad, 0, wall_shape[0], wall_shape[1], ox, oy, h, p)
+def wall_sample(walls: ti.template(), p):
+    """Wall level set (positive in the fluid) and its gradient at world point ``p``
+    (``walls``: a :class:`~taichi_hsdem.dem.state.WallGrid` pack)."""
+    phi, g = grid_sample(walls.phi, walls.grad, 0, walls.shape[0], walls.shape[1],
+                         walls.geo[GEO_OX], walls.geo[GEO_OY], walls.geo[GEO_H], p)
     return phi, g
 
 

@@ -7,6 +7,8 @@ constants: the host imports this module without loading Taichi).
 * ``flags[F_*]``: batch-wide counters and requests (int32).
 * ``Materials.pair[a, b, PAIR_*]`` and ``Materials.wall[a, PAIR_*]``: the contact law
   of a species pair and of a species against the walls.
+* ``geo[GEO_*]`` of a grid (``Templates.ls_geo[t]``, ``WallGrid.geo``,
+  ``NeighborList.cell_geo``): its lower-left corner and spacing.
 * ``SAMPLING``: how a surface node reads the pressure (``fluid.pressure_sampling``).
 """
 
@@ -25,6 +27,10 @@ N_FLAGS = 4
 # Columns of the contact-law tables.
 PAIR_KN, PAIR_KS, PAIR_MU, PAIR_CE = 0, 1, 2, 3
 N_PAIR = 4
+
+# Columns of a grid's geometry; the neighbour grid's holds the Verlet skin too.
+GEO_OX, GEO_OY, GEO_H = 0, 1, 2
+GEO_SKIN = 3
 
 SAMPLING = {"bilinear": 0, "cell": 1}
 

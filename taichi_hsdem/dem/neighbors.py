@@ -15,106 +15,111 @@ import numpy as np
 
 from .. import backend
 from ..backend import ti  # sets the environment before Taichi loads
-from .layout import F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD
+from .layout import F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD, GEO_H, GEO_OX, GEO_OY, GEO_SKIN
+from .state import Batch, Bodies, Bundle, Particles, array, pack_type
 
 vec2 = ti.math.vec2
 
+# The pack of a NeighborList: its arrays, and its grid's cell counts (ncx, ncy)
+# and geometry (layout.GEO_*, with the Verlet skin).
+NEIGHBORS = pack_type("NeighborList", ("x_ref", "cell_n", "cell_p", "nbr", "nbr_n",
+                                       "cell_shape", "cell_geo"))
+
 
 @ti.kernel
-def bin_particles(x: ti.types.ndarray(), alive: ti.types.ndarray(), running: ti.types.ndarray(),
-                  cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(), ox: float, oy: float,
-                  cs: float, ncx: ti.i32, ncy: ti.i32, flags: ti.types.ndarray()):
-    for r in range(x.shape[0]):
-        bin_one(x, alive, running, cell_n, cell_p, ox, oy, cs, ncx, ncy, flags, r)  # (the
-        # overflow it returns is for the fused stepper; here flags carries it)
+def bin_particles(bodies: Bodies.Pack, batch: Batch.Pack, neighbors: NEIGHBORS,
+                  flags: ti.types.ndarray()):
+    for r in range(bodies.x.shape[0]):
+        # (the overflow it returns is for the fused stepper; here flags carries it)
+        bin_one(bodies, batch, neighbors, flags, r)
 
 
 @ti.func
-def cell_of(ox, oy, cs, ncx, ncy, p):
-    """Cell (clamped to the grid) holding world point ``p``; the grid's lower-left
-    corner is (ox, oy), its cells ``cs`` wide."""
-    cx = ti.min(ti.max(ti.cast(ti.floor((p.x - ox) / cs), ti.i32), 0), ncx - 1)
-    cy = ti.min(ti.max(ti.cast(ti.floor((p.y - oy) / cs), ti.i32), 0), ncy - 1)
-    return cx, cy
+def cell_of(neighbors: ti.template(), p):
+    """Cell (clamped to the grid) holding world point ``p``."""
+    geo = ti.static(neighbors.cell_geo)
+    cs = geo[GEO_H]
+    cx = ti.cast(ti.floor((p.x - geo[GEO_OX]) / cs), ti.i32)
+    cy = ti.cast(ti.floor((p.y - geo[GEO_OY]) / cs), ti.i32)
+    return (ti.min(ti.max(cx, 0), neighbors.cell_shape[0] - 1),
+            ti.min(ti.max(cy, 0), neighbors.cell_shape[1] - 1))
 
 
 @ti.func
-def bin_one(x: ti.template(), alive: ti.template(), running: ti.template(),
-            cell_n: ti.template(), cell_p: ti.template(), ox, oy, cs, ncx, ncy,
+def bin_one(bodies: ti.template(), batch: ti.template(), neighbors: ti.template(),
             flags: ti.template(), r):
     """Bin the live bodies of realization ``r``, serially (a reproducible order);
     returns 1 if a cell overflowed its capacity."""
-    cap = cell_p.shape[2]
+    cap = neighbors.cell_p.shape[2]
+    ncy = neighbors.cell_shape[1]
     overflow = 0
-    for c in range(ncx * ncy):
-        cell_n[r, c] = 0
-    if running[r] != 0:
-        for i in range(x.shape[1]):
-            if alive[r, i] != 0:
-                cx, cy = cell_of(ox, oy, cs, ncx, ncy, x[r, i])
+    for c in range(neighbors.cell_shape[0] * ncy):
+        neighbors.cell_n[r, c] = 0
+    if batch.running[r] != 0:
+        for i in range(bodies.x.shape[1]):
+            if bodies.alive[r, i] != 0:
+                cx, cy = cell_of(neighbors, bodies.x[r, i])
                 c = cx * ncy + cy
-                slot = cell_n[r, c]
+                slot = neighbors.cell_n[r, c]
                 if slot < cap:
-                    cell_p[r, c, slot] = i
+                    neighbors.cell_p[r, c, slot] = i
                 else:
                     flags[F_CELL_OVERFLOW] = 1
                     overflow = 1
-                cell_n[r, c] = slot + 1
+                neighbors.cell_n[r, c] = slot + 1
     return overflow
 
 
 @ti.kernel
-def build_neighbors(x: ti.types.ndarray(), x_ref: ti.types.ndarray(), alive: ti.types.ndarray(),
-                    running: ti.types.ndarray(), rb: ti.types.ndarray(),
-                    cell_n: ti.types.ndarray(), cell_p: ti.types.ndarray(),
-                    nbr: ti.types.ndarray(), nbr_n: ti.types.ndarray(), ox: float, oy: float,
-                    cs: float, skin: float, ncx: ti.i32, ncy: ti.i32,
-                    flags: ti.types.ndarray()):
-    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
-        list_one(x, x_ref, alive, running, rb, cell_n, cell_p, nbr, nbr_n, ox, oy, cs, skin,
-                 ncx, ncy, flags, r, i)  # (the count is for the fused stepper)
+def build_neighbors(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pack,
+                    neighbors: NEIGHBORS, flags: ti.types.ndarray()):
+    for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
+        # (the count it returns is for the fused stepper)
+        list_one(bodies, batch, particles, neighbors, flags, r, i)
 
 
 @ti.func
-def list_one(x: ti.template(), x_ref: ti.template(), alive: ti.template(),
-             running: ti.template(), rb: ti.template(), cell_n: ti.template(),
-             cell_p: ti.template(), nbr: ti.template(), nbr_n: ti.template(),
-             ox, oy, cs, skin, ncx, ncy, flags: ti.template(), r, i):
+def list_one(bodies: ti.template(), batch: ti.template(), particles: ti.template(),
+             neighbors: ti.template(), flags: ti.template(), r, i):
     """Neighbour list of body ``i`` of realization ``r`` from the binned cells;
     returns how many neighbours it found (more than the capacity: overflow)."""
-    cap = nbr.shape[2]
-    ccap = cell_p.shape[2]
-    nbr_n[r, i] = 0
-    x_ref[r, i] = x[r, i]
+    cap = neighbors.nbr.shape[2]
+    ccap = neighbors.cell_p.shape[2]
+    ncx = neighbors.cell_shape[0]
+    ncy = neighbors.cell_shape[1]
+    neighbors.nbr_n[r, i] = 0
+    neighbors.x_ref[r, i] = bodies.x[r, i]
     count = 0
-    if running[r] != 0 and alive[r, i] != 0:
-        xi = x[r, i]
-        cx, cy = cell_of(ox, oy, cs, ncx, ncy, xi)
+    if batch.running[r] != 0 and bodies.alive[r, i] != 0:
+        xi = bodies.x[r, i]
+        cx, cy = cell_of(neighbors, xi)
         for dx, dy in ti.ndrange((-1, 2), (-1, 2)):
             ax = cx + dx
             ay = cy + dy
             if 0 <= ax < ncx and 0 <= ay < ncy:
                 c = ax * ncy + ay
-                for s in range(ti.min(cell_n[r, c], ccap)):
-                    j = cell_p[r, c, s]
-                    if j != i and (x[r, j] - xi).norm() < rb[i] + rb[j] + skin:
+                for s in range(ti.min(neighbors.cell_n[r, c], ccap)):
+                    j = neighbors.cell_p[r, c, s]
+                    if j != i and ((bodies.x[r, j] - xi).norm()
+                                   < particles.bounding_radius[i] + particles.bounding_radius[j]
+                                   + neighbors.cell_geo[GEO_SKIN]):
                         if count < cap:
                             # Keep the list sorted by index: the order in which forces
                             # are summed must not depend on when (or, batched, why)
                             # the list was built.
                             slot = count
-                            while slot > 0 and nbr[r, i, slot - 1] > j:
-                                nbr[r, i, slot] = nbr[r, i, slot - 1]
+                            while slot > 0 and neighbors.nbr[r, i, slot - 1] > j:
+                                neighbors.nbr[r, i, slot] = neighbors.nbr[r, i, slot - 1]
                                 slot -= 1
-                            nbr[r, i, slot] = j
+                            neighbors.nbr[r, i, slot] = j
                         else:
                             flags[F_NBR_OVERFLOW] = 1
                         count += 1
-        nbr_n[r, i] = ti.min(count, cap)
+        neighbors.nbr_n[r, i] = ti.min(count, cap)
     return count
 
 
-class NeighborList:
+class NeighborList(Bundle):
     """Owns the cell list and the neighbour list of a batch of realizations.
 
     Parameters
@@ -129,6 +134,7 @@ class NeighborList:
         Initial capacities: bodies per cell, neighbours per body. Each doubles
         whenever a build overflows it.
     """
+    Pack = NEIGHBORS
 
     def __init__(self, n_real, n_part, bbox, max_radius, skin, cell_cap=8, nbr_cap=16):
         self.skin = float(skin)
@@ -140,6 +146,8 @@ class NeighborList:
         self.cell_cap = int(cell_cap)
         self.nbr_cap = int(nbr_cap)
         self.cell_n = ti.ndarray(ti.i32, shape=(n_real, self.ncx * self.ncy))
+        self.cell_shape = array(np.array([self.ncx, self.ncy]), ti.i32)
+        self.cell_geo = array(np.array([*self.origin, self.cell_size, self.skin]))
         self._alloc_cells()
         self._alloc_nbr()
         self.x_ref = ti.Vector.ndarray(2, backend.real(), shape=self.shape)
@@ -152,25 +160,15 @@ class NeighborList:
         self.nbr = ti.ndarray(ti.i32, shape=self.shape + (self.nbr_cap,))
         self.nbr_n = ti.ndarray(ti.i32, shape=self.shape)
 
-    @property
-    def grid(self) -> tuple:
-        """The scalars the kernels take: origin x, origin y, cell size, skin, and
-        the cell counts ncx, ncy."""
-        return (self.origin[0], self.origin[1], self.cell_size, self.skin, self.ncx, self.ncy)
-
     def build(self, bodies, batch, particles, flags):
         """Rebuild, growing the capacities until nothing overflows."""
-        ox, oy, cs, skin, ncx, ncy = self.grid
-        x, alive, running = bodies.x, bodies.alive, batch.running
         while True:
             flags_np = flags.to_numpy()
             flags_np[[F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD]] = 0
             flags.from_numpy(flags_np)
-            bin_particles(x, alive, running, self.cell_n, self.cell_p, ox, oy, cs, ncx, ncy,
-                          flags)
-            build_neighbors(x, self.x_ref, alive, running, particles.bounding_radius,
-                            self.cell_n, self.cell_p, self.nbr, self.nbr_n, ox, oy, cs, skin,
-                            ncx, ncy, flags)
+            b, q, nl = bodies.pack(), batch.pack(), self.pack()
+            bin_particles(b, q, nl, flags)
+            build_neighbors(b, q, particles.pack(), nl, flags)
             got = flags.to_numpy()
             if got[F_CELL_OVERFLOW]:
                 self.cell_cap *= 2

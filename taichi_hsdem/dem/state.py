@@ -14,10 +14,15 @@ take these bundles and hand their arrays to the kernels.
   array with per-template offset, shape and spacing, and its surface nodes.
 * :class:`WallGrid`: the walls' level set.
 * :class:`ShearHistory`: the double-buffered shear of every contact.
+
+Each bundle hands its arrays to a kernel as one argument: ``bundle.pack()`` is a
+Taichi argument pack (``ti.types.argpack``) of type ``Bundle.Pack`` whose members
+are the bundle's arrays under their own names, so a kernel reads
+``bodies.x[r, i]`` and adding an array to a bundle is one line here.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -49,28 +54,86 @@ def _zeros(shape, dtype=None, vector=False):
     return a
 
 
+#: The annotation of a bundle's field that is a Taichi array the kernels read (it
+#: goes into the bundle's pack); other fields stay on the host.
+Array = object
+
+# Argument-pack member name -> the bundle that owns it. Taichi 1.7.4 declares the
+# arrays of a kernel's argpack arguments by member name alone: two packs of one
+# kernel holding arrays of the same name fail to compile, or hand one the other's
+# array, so every name is unique across bundles. It also counts the members as the
+# kernel's own arguments: a kernel (not a ti.func) cannot assign a local variable
+# of a member's name ("Kernel argument ... is immutable").
+_MEMBER_OWNER: dict = {}
+
+
+def pack_type(owner: str, names) -> object:
+    """The argpack type of the arrays ``names`` of bundle ``owner``; raises
+    TypeError if another bundle already uses one of the names."""
+    for name in names:
+        if _MEMBER_OWNER.get(name, owner) != owner:
+            raise TypeError(f"{owner}.{name}: {_MEMBER_OWNER[name]} already has an array "
+                            f"of that name (pack members must be unique across bundles)")
+    _MEMBER_OWNER.update(dict.fromkeys(names, owner))
+    # untyped members: the kernels compile once per real type, as with plain arguments
+    return ti.types.argpack(**{name: ti.types.ndarray() for name in names})
+
+
+class Bundle:
+    """Arrays that the kernels take as one argument of type ``Pack``.
+
+    :meth:`pack` builds the argument pack once and keeps it (building one costs
+    about as much as a kernel launch), again when an array is replaced (a grown
+    neighbour list) and for each order of :class:`ShearHistory`'s two buffers.
+    """
+    Pack = None
+
+    def arrays(self) -> dict:
+        """The pack's members by name."""
+        return {name: getattr(self, name) for name in self.Pack.members}
+
+    def pack(self):
+        """The argument pack of the bundle's arrays as they are now."""
+        arrays = self.arrays()
+        key = tuple(map(id, arrays.values()))
+        packs = self.__dict__.setdefault("_packs", {})
+        if key not in packs:
+            if len(packs) > 1:
+                packs.clear()
+            packs[key] = self.Pack(**arrays)
+        return packs[key]
+
+
+def bundle(cls):
+    """Make ``cls`` a dataclass and a :class:`Bundle` whose pack holds its
+    ``Array`` fields."""
+    cls = dataclass(cls)
+    cls.Pack = pack_type(cls.__name__, [f.name for f in fields(cls) if f.type == "Array"])
+    return cls
+
+
 def _grid_gradient(phi: np.ndarray, h: float) -> np.ndarray:
     """Central-difference gradient of an x-first grid, flattened to (nx*ny, 2)."""
     gx, gy = np.gradient(phi, h)
     return np.stack([gx.ravel(), gy.ravel()], axis=1)
 
 
-@dataclass
-class Bodies:
+@bundle
+class Bodies(Bundle):
     """State of every body, ``(R, N)``; ``force``/``torque`` are the last step's
     resultants, ``f_fluid``/``tau_fluid`` the pressure force held between
     evaluations, ``f_ext``/``tau_ext`` external loads (zero unless set)."""
-    x: object
-    theta: object
-    v: object
-    omega: object
-    force: object
-    torque: object
-    f_fluid: object
-    tau_fluid: object
-    f_ext: object
-    tau_ext: object
-    alive: object
+    x: Array
+    theta: Array
+    v: Array
+    omega: Array
+    force: Array
+    torque: Array
+    f_fluid: Array
+    tau_fluid: Array
+    f_ext: Array
+    tau_ext: Array
+    alive: Array
 
     @classmethod
     def zeros(cls, R: int, N: int) -> "Bodies":
@@ -83,17 +146,17 @@ class Bodies:
                    alive=_zeros(shape, ti.i32))
 
 
-@dataclass
-class Batch:
+@bundle
+class Batch(Bundle):
     """Per realization, ``(R,)``: ``running`` (1 while it runs), ``escaped`` (bodies
     past the escape line), ``bad`` (``layout.BAD_*`` bits), ``max_overlap``
     (deepest overlap since the last check, fraction of d_eq); ``status``: where
     ``integrate.read_status`` gathers them for the host."""
-    running: object
-    escaped: object
-    bad: object
-    max_overlap: object
-    status: object
+    running: Array
+    escaped: Array
+    bad: Array
+    max_overlap: Array
+    status: Array
 
     @classmethod
     def start(cls, R: int) -> "Batch":
@@ -102,17 +165,17 @@ class Batch:
                    status=_zeros((4, R)))
 
 
-@dataclass
-class Particles:
+@bundle
+class Particles(Bundle):
     """Constant per particle, ``(N,)``: species (which is also the shape template's
     index: one template per species), mass, moment of inertia, equivalent
     diameter, disk radius (the analytic path) and bounding radius."""
-    species: object
-    mass: object
-    inertia: object
-    d_eq: object
-    radius: object
-    bounding_radius: object
+    species: Array
+    mass: Array
+    inertia: Array
+    d_eq: Array
+    disk_radius: Array
+    bounding_radius: Array
     species_np: np.ndarray
 
     @classmethod
@@ -126,20 +189,20 @@ class Particles:
         return cls(species=array(spp, ti.i32), mass=per_particle(lambda s: s.mass),
                    inertia=per_particle(lambda s: s.inertia),
                    d_eq=per_particle(lambda s: s.d_eq),
-                   radius=per_particle(lambda s: s.shape.radius),
+                   disk_radius=per_particle(lambda s: s.shape.radius),
                    bounding_radius=per_particle(lambda s: s.shape.bounding_radius),
                    species_np=spp)
 
 
-@dataclass
-class Materials:
+@bundle
+class Materials(Bundle):
     """``pair`` (S, S, N_PAIR) and ``wall`` (S, N_PAIR): kn, ks, mu, c_e
     (``layout.PAIR_*``); ``xi`` (S,) global damping; ``kappa`` (S,) permeability
     inside a particle of the species."""
-    pair: object
-    wall: object
-    xi: object
-    kappa: object
+    pair: Array
+    wall: Array
+    xi: Array
+    kappa: Array
 
     @classmethod
     def of(cls, model) -> "Materials":
@@ -149,8 +212,8 @@ class Materials:
                    kappa=array(np.array([s.kappa for s in sp])))
 
 
-@dataclass
-class Templates:
+@bundle
+class Templates(Bundle):
     """Every template's level-set grid in one flat array (``ls_meta[t]``: offset,
     nx, ny; ``ls_geo[t]``: origin x, origin y, spacing) with its central-difference
     gradient; surface nodes in body frame (``node_meta[t]``: offset, count) with
@@ -159,16 +222,16 @@ class Templates:
     not its centroid, which a concave body may not contain), the one the "passed
     through" check tests; ``is_circle`` and ``radius`` for the templates that are
     exact circles."""
-    ls_phi: object
-    ls_grad: object
-    ls_meta: object
-    ls_geo: object
-    node_pos: object
-    node_area: object
-    node_meta: object
-    inside: object
-    is_circle: object
-    radius: object
+    ls_phi: Array
+    ls_grad: Array
+    ls_meta: Array
+    ls_geo: Array
+    node_pos: Array
+    node_area: Array
+    node_meta: Array
+    inside: Array
+    is_circle: Array
+    radius: Array
     node_count: np.ndarray
 
     @classmethod
@@ -195,30 +258,32 @@ class Templates:
                    node_count=np.asarray(stk["node_count"]))
 
 
-@dataclass
-class WallGrid:
+@bundle
+class WallGrid(Bundle):
     """The walls' level set (positive in the fluid), flat x-first, with its
-    gradient, its grid ``shape`` (nx, ny), ``origin`` and ``spacing``."""
-    phi: object
-    grad: object
-    shape: object
-    origin: tuple
-    spacing: float
+    gradient, its grid ``shape`` (nx, ny) and ``geo`` (origin x, origin y,
+    spacing: ``layout.GEO_*``)."""
+    phi: Array
+    grad: Array
+    shape: Array
+    geo: Array
 
     @classmethod
     def of(cls, model) -> "WallGrid":
         wf = model.wall_field
         return cls(phi=array(wf.phi.ravel()), grad=array(_grid_gradient(wf.phi, wf.spacing)),
                    shape=array(np.array(wf.phi.shape), ti.i32),
-                   origin=(float(wf.origin[0]), float(wf.origin[1])),
-                   spacing=float(wf.spacing))
+                   geo=array(np.array([wf.origin[0], wf.origin[1], wf.spacing], dtype=float)))
 
 
-class ShearHistory:
+class ShearHistory(Bundle):
     """Shear force of every contact, per body and surface node: ``slots`` partners
     per node (``partner + 1`` in the int array, 0 for a free slot; the walls are
     partner ``N``). Double-buffered: a step reads :attr:`old` and writes
-    :attr:`new`, then :meth:`swap`."""
+    :attr:`new`, then :meth:`swap`; the pack holds them as ``partners_old``,
+    ``shear_old``, ``partners_new``, ``shear_new``."""
+    Pack = pack_type("ShearHistory", ("partners_old", "shear_old", "partners_new",
+                                      "shear_new"))
 
     def __init__(self, R: int, N: int, nodes: int, slots: int):
         self.slots = slots
@@ -239,6 +304,11 @@ class ShearHistory:
     @property
     def new(self):
         return self.buffers[1]
+
+    def arrays(self) -> dict:
+        (partners_old, shear_old), (partners_new, shear_new) = self.old, self.new
+        return dict(partners_old=partners_old, shear_old=shear_old,
+                    partners_new=partners_new, shear_new=shear_new)
 
     def swap(self):
         self.buffers.reverse()
