@@ -6,6 +6,7 @@ import pytest
 
 from conftest import arena_scene, both_precisions, head_on, make_sim, ulp
 from taichi_hsdem import SceneError, Simulation, load_scene
+from taichi_hsdem.gallery import node_law_disks
 
 DISK = {"shape": "circle", "diameter": 1.0, "count": 2}
 
@@ -214,22 +215,12 @@ def face_overlap(nodes, normalize, load=10.0):
     return 0.5 - st["x"][0, 0, 1]                # how deep the face sits in the floor
 
 
-def _node_law_disks():
-    import importlib.util
-    from pathlib import Path
-    path = Path(__file__).resolve().parents[1] / "tools" / "convergence.py"
-    spec = importlib.util.spec_from_file_location("convergence_tool", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.node_law_disks
-
-
 def test_node_law_reference_tends_to_the_lens_limit():
     # The reference below, on its own: with many nodes the normalised law is kn
     # times the mean depth over the overlapped arc, which for a shallow overlap is a
     # parabolic lens, 2/3 of delta (cos of the normal's tilt -> 1); summed, it is
     # nodes / (2 pi) times the arc 2 sqrt(r delta) / r times that mean depth.
-    law = _node_law_disks()
+    law = node_law_disks
     assert law(400_000, 1e-4, 0.3, True)[0] == pytest.approx(2.0 / 3.0, rel=2e-3)
     half_arc = math.sqrt(0.5 * 1e-4) / 0.5             # sqrt(r delta) / r, r = 0.5
     summed = 400_000 / (2 * math.pi) * (2.0 / 3.0) * 2 * half_arc
@@ -247,7 +238,7 @@ def test_level_set_disk_pair_force_is_the_node_law_on_the_exact_distance(normali
     # shallowest mean node depth here (0.5 delta); measured 0.07-0.3 %. Allowed:
     # 1 %. The angles are fixed: one that leaves a node within the grid error of the
     # contact's edge could flip it in or out, which this bound does not cover.
-    law = _node_law_disks()
+    law = node_law_disks
     kn, depth, turn = 1.0e4, 0.02, 0.3 * 2 * math.pi / 40
     sim = make_sim(arena_scene([dict(DISK, nodes=40, ls_spacing=1 / 80)], kn=kn,
                                fast_path=False, normalize=normalize))

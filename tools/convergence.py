@@ -81,7 +81,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
 
 
 def _write(out, name, header, rows):
@@ -155,49 +154,8 @@ def pressure_study(out, quick):
     return rows, csv_path, png
 
 
-def node_law_disks(nodes, depth, angle, normalize, diameter=1.0, turn=0.0):
-    """The LS-DEM node law for two equal disks evaluated with the *exact* signed
-    distance (no level-set grid): ``(F / (kn delta), n_i, n_j)``, the force on the
-    first disk along the line of centres at overlap ``delta = depth * diameter``,
-    and how many nodes of each disk are in contact.
-
-    Disk ``i`` at the origin, unrotated, ``j`` at ``(diameter - delta) (cos angle,
-    sin angle)`` turned by ``turn``, ``nodes`` surface nodes each at body angles
-    ``2 pi k / nodes``. Each direction (``i``'s nodes in ``j``, ``j``'s nodes in
-    ``i``) sums ``-phi n`` over its nodes in contact, divided by their number when
-    ``normalize``; when both see the contact the pair force is the mean (README,
-    Model choices: Contact). With ``nodes -> infinity`` and ``normalize`` this tends
-    to the mean node depth over the overlapped arc, ``2/3`` of ``delta`` as
-    ``delta -> 0`` (a parabolic lens): the law's own limit, which differs from the
-    analytic disk's ``kn delta``.
-    """
-    r = 0.5 * diameter
-    delta = depth * diameter
-    u = np.array([np.cos(angle), np.sin(angle)])
-    ci, cj = np.zeros(2), (diameter - delta) * u
-    ang = 2.0 * np.pi * np.arange(nodes) / nodes
-
-    def ring(turn_):
-        return r * np.stack([np.cos(ang + turn_), np.sin(ang + turn_)], axis=1)
-
-    def side(own, other, turn_):
-        p = own + ring(turn_)
-        dist = np.linalg.norm(p - other, axis=1)
-        inside = dist < r
-        f = ((r - dist[inside]) / dist[inside])[:, None] * (p[inside] - other)
-        total = f.sum(axis=0)
-        return (total / max(1, inside.sum()) if normalize else total), int(inside.sum())
-
-    fa, na = side(ci, cj, 0.0)            # nodes of i in j: force on i
-    fb, nb = side(cj, ci, turn)           # nodes of j in i: force on j, reaction on i
-    f_i = fa - fb
-    if na and nb:
-        f_i = 0.5 * f_i
-    return float(-f_i @ u / delta), na, nb
-
-
 def contact_study(out, quick):
-    from conftest import arena_scene, make_sim
+    from taichi_hsdem.gallery import arena_scene, make_sim, node_law_disks
     from taichi_hsdem import backend
     backend.init("cpu", "f64")
     kn, depth = 1.0e4, 0.02
@@ -341,7 +299,7 @@ def concave_contact_study(out, quick):
     to `CONCAVE_REFERENCE`: the force along the press over ``kn delta`` (mean, least
     and most over the offsets), the force across it, and the change from the
     defaults, against the surface nodes and the time of one step."""
-    from conftest import arena_scene, make_sim
+    from taichi_hsdem.gallery import arena_scene, make_sim
     from taichi_hsdem.resolve import particles as rs
     kn, depth = 1.0e4, 0.02
     fractions = (2.0, 1.0, 0.5, 0.25) if quick else CONCAVE_FRACTIONS
@@ -445,7 +403,7 @@ TIMESTEP_RESTITUTIONS = (0.3, 0.5, 0.7, 0.9)
 
 
 def timestep_study(out, quick):
-    from conftest import head_on           # the collision tests/test_mechanics.py checks
+    from taichi_hsdem.gallery import head_on  # the collision tests/test_mechanics.py checks
     from taichi_hsdem import backend
     backend.init("cpu", "f64")
     safeties = (0.02, 0.15, 0.3) if quick else TIMESTEP_SAFETIES
