@@ -28,7 +28,7 @@ import numpy as np
 
 from . import backend, stats
 from .dem import contact, coupling, fused, integrate, state
-from .dem.layout import BAD_FAST, BAD_NAN, BAD_PASSED, F_HISTORY_OVERFLOW, F_REBUILD
+from .layout import BAD_FAST, BAD_NAN, BAD_PASSED, F_HISTORY_OVERFLOW, F_REBUILD
 from .dem.neighbors import NeighborList
 from .geometry.placement import PlacementError, find_free_spot, place
 from .resolve import Model, resolve

@@ -13,7 +13,7 @@ import pytest
 
 from conftest import arena_scene, make_sim
 from taichi_hsdem import SceneError, Simulation, load_scene
-from taichi_hsdem.dem.layout import BAD_PASSED
+from taichi_hsdem.layout import BAD_PASSED
 from taichi_hsdem.geometry import distance as dist
 from taichi_hsdem.geometry import shapes as sh
 from taichi_hsdem.resolve import node_gap, resolve

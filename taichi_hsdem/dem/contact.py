@@ -40,7 +40,7 @@ pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
 
 from ..backend import ti  # sets the environment before Taichi loads
 from .kmath import cross, node_world, rot, rot_t, spin, template_sample, wall_sample
-from .layout import BAD_PASSED, F_HISTORY_OVERFLOW, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
+from ..layout import BAD_PASSED, F_HISTORY_OVERFLOW, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
 from .neighbors import NEIGHBORS
 from .state import Batch, Bodies, Materials, Particles, ShearHistory, Templates, WallGrid
 

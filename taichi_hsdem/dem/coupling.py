@@ -35,7 +35,7 @@ from ..fluid import PressureSolver
 from ..fluid.gmg import BodyTerms, TaichiPressureSolver
 from . import state
 from .kmath import cross, node_world, rot, rot_t, spin, template_sample
-from .layout import SAMPLING
+from ..layout import SAMPLING
 
 vec2 = ti.math.vec2
 

@@ -29,7 +29,7 @@ it catch up, so no contact is dropped.
 from ..backend import ti  # sets the environment before Taichi loads
 from .contact import disk_force
 from .integrate import advance_body
-from .layout import GEO_SKIN
+from ..layout import GEO_SKIN
 from .neighbors import NEIGHBORS, bin_one, list_one
 from .state import Batch, Bodies, Materials, Particles, ShearHistory, WallGrid
 

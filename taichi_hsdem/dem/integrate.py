@@ -15,7 +15,7 @@ for a rebuild). It also counts bodies crossing the escape line and parks them.
 import numpy as np
 
 from ..backend import ti  # sets the environment before Taichi loads
-from .layout import BAD_FAST, BAD_NAN, F_REBUILD
+from ..layout import BAD_FAST, BAD_NAN, F_REBUILD
 from .neighbors import NEIGHBORS
 from .state import Batch, Bodies, Materials, Particles
 

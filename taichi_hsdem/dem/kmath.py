@@ -3,7 +3,7 @@ rotations, the 2D cross product, the velocity of a point of a spinning body, and
 the bilinear sampling of a level-set grid (a template's or the walls')."""
 
 from ..backend import ti  # sets the environment before Taichi loads
-from .layout import GEO_H, GEO_OX, GEO_OY, OUTSIDE
+from ..layout import GEO_H, GEO_OX, GEO_OY, OUTSIDE
 
 vec2 = ti.math.vec2
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import backend
 from ..backend import ti  # sets the environment before Taichi loads
-from .layout import F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD, GEO_H, GEO_OX, GEO_OY, GEO_SKIN
+from ..layout import F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD, GEO_H, GEO_OX, GEO_OY, GEO_SKIN
 from .state import Batch, Bodies, Bundle, Particles, array, pack_type
 
 vec2 = ti.math.vec2

@@ -31,8 +31,8 @@ from ..backend import ti
 from ..geometry import distance, levelset
 from ..geometry import shapes as shp
 from ..resolve import pair_table, wall_table
-from . import layout
-from .layout import DISK_HISTORY_SLOTS, LS_HISTORY_SLOTS
+from .. import layout
+from ..layout import DISK_HISTORY_SLOTS, LS_HISTORY_SLOTS
 
 
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from .. import limits
-from ..dem.layout import DISK_HISTORY_SLOTS, LS_HISTORY_SLOTS
+from ..layout import DISK_HISTORY_SLOTS, LS_HISTORY_SLOTS
 from ..fluid import PressureSolver
 from ..fluid.pool import usable_cpus
 from ..geometry import walls as wl

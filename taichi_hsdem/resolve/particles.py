@@ -12,6 +12,7 @@ from ..geometry import distance as dist
 from ..geometry import shapes as shp
 from ..geometry import walls as wl
 from ..laws import harmonic_mean, restitution_factor
+from ..layout import N_PAIR, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
 from ..limits import Part
 from ..scene import Scene
 from ..scene.keys import AUTO, shape_vertex_count
@@ -281,18 +282,23 @@ def _stiffness(res: _Resolution, scene: Scene, geom, species: list[Species]) -> 
 
 
 def pair_table(species: list[Species]) -> np.ndarray:
-    """(S, S, 4) kn, ks, mu, c_e of every species pair (see docs/scene.md)."""
+    """(S, S, N_PAIR) kn, ks, mu, c_e of every species pair, in the columns
+    ``layout.PAIR_*`` the kernels read (see docs/scene.md)."""
     n = len(species)
-    out = np.zeros((n, n, 4))
+    out = np.zeros((n, n, N_PAIR))
     for a, sa in enumerate(species):
         for b, sb in enumerate(species):
-            out[a, b] = (harmonic_mean(sa.kn, sb.kn), harmonic_mean(sa.ks, sb.ks),
-                         0.5 * (sa.friction + sb.friction),
-                         restitution_factor(0.5 * (sa.restitution + sb.restitution)))
+            out[a, b, PAIR_KN] = harmonic_mean(sa.kn, sb.kn)
+            out[a, b, PAIR_KS] = harmonic_mean(sa.ks, sb.ks)
+            out[a, b, PAIR_MU] = 0.5 * (sa.friction + sb.friction)
+            out[a, b, PAIR_CE] = restitution_factor(0.5 * (sa.restitution + sb.restitution))
     return out
 
 
 def wall_table(species: list[Species]) -> np.ndarray:
-    """(S, 4) kn, ks, mu, c_e of every species against a wall."""
-    return np.array([(s.kn, s.ks, s.friction, restitution_factor(s.restitution))
-                     for s in species])
+    """(S, N_PAIR) kn, ks, mu, c_e of every species against a wall."""
+    out = np.zeros((len(species), N_PAIR))
+    for a, s in enumerate(species):
+        out[a, PAIR_KN], out[a, PAIR_KS], out[a, PAIR_MU] = s.kn, s.ks, s.friction
+        out[a, PAIR_CE] = restitution_factor(s.restitution)
+    return out
