@@ -22,18 +22,26 @@ Examples
 from __future__ import annotations
 
 import json
+import math
 import os
+import struct
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from . import backend
 from .digest import code_digest
-from .scene import load_scene, scene_to_toml
-from .scene.toml import parse_toml
+from .scene import SceneError, load_scene, scene_to_toml
+from .scene.toml import parse_toml, tomllib
 
 FILE = "checkpoint.npz"
 FORMAT = 1
+# simulation.RealizationResult's fields and the statuses it takes (not imported:
+# the command line reads checkpoints before it loads Taichi).
+RESULT_KEYS = ("seed", "escapees", "clogged", "t_clog", "status", "reason", "t_stop")
+RESULT_STATUSES = ("ok", "unstable")
 
 
 class CheckpointError(ValueError):
@@ -107,22 +115,138 @@ def save(sim, path) -> Path:
     return path
 
 
+# Every exception np.load and the zip reader raise on a damaged file: a short or
+# cut zip (BadZipFile, EOFError), a member whose CRC fails (BadZipFile), a .npy
+# header that does not parse or promises more than the member holds (ValueError),
+# a member whose declared shape cannot be allocated (MemoryError), compressed data
+# that does not inflate (zlib.error), a missing array (KeyError).
+_UNREADABLE = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error,
+               MemoryError, struct.error)
+
+
 def read_header(path) -> dict:
     """The JSON header of a checkpoint (``scene`` text, ``code`` digest, ``host``
-    state); :class:`CheckpointError` when the file is missing or not one."""
+    state), every field checked (types, ranges, the scene inside valid);
+    :class:`CheckpointError` when the file is missing, damaged or not one."""
     path = Path(path)
-    try:
-        with np.load(path) as data:
-            header = json.loads(bytes(data["header"]).decode())
-    except FileNotFoundError:
+    if not path.exists():
         raise CheckpointError(f"{path}: no checkpoint here (a run leaves checkpoint.npz in "
-                              "its output folder)") from None
-    except (OSError, ValueError, KeyError, json.JSONDecodeError) as exc:
-        raise CheckpointError(f"{path}: not a readable checkpoint ({exc})") from None
-    if header.get("format") != FORMAT:
-        raise CheckpointError(f"{path}: checkpoint format {header.get('format')} is not "
-                              f"the {FORMAT} this version reads")
+                              "its output folder)")
+    if not path.is_file():
+        raise CheckpointError(f"{path}: not a regular file")
+    try:
+        if not zipfile.is_zipfile(path):    # np.load would read it as .npy or pickle
+            raise CheckpointError(f"{path}: not a readable checkpoint (not a complete .npz "
+                                  "archive: cut short, or another kind of file)")
+        with np.load(path, allow_pickle=False) as data:
+            header = json.loads(bytes(data["header"]).decode())
+    except CheckpointError:
+        raise
+    except (*_UNREADABLE, RecursionError) as exc:
+        raise CheckpointError(f"{path}: not a readable checkpoint ({_reason(exc)})") from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        found = header.get("format") if isinstance(header, dict) else None
+        raise CheckpointError(f"{path}: checkpoint format {found!r} is not the {FORMAT} this "
+                              "version reads")
+    for key in ("code", "precision", "scene", "source"):
+        if not isinstance(header.get(key), str):
+            raise CheckpointError(f"{path}: header.{key}: missing or not text")
+    _check_host(header.get("host"), path)
+    try:
+        scene = load_scene(parse_toml(header["scene"]))
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise CheckpointError(f"{path}: the scene inside is not TOML ({_reason(exc)})") from None
+    except SceneError as exc:
+        raise CheckpointError(f"{path}: the scene inside is not valid: "
+                              f"{exc.problems[0].partition(': ')[2]}") from None
+    if len(header["host"]["seeds"]) != scene.run.realizations:
+        raise CheckpointError(f"{path}: host.seeds: {len(header['host']['seeds'])} seeds for "
+                              f"the scene's {scene.run.realizations} realizations")
     return header
+
+
+def _reason(exc: BaseException) -> str:
+    """An exception in a few words (its message, or its type when it has none)."""
+    text = " ".join(str(exc).split())[:200]
+    return text or type(exc).__name__
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_real(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _check_host(host, path) -> None:
+    """Every field of the header's ``host`` record: its type and range (``t`` finite
+    and >= 0, counters non-negative integers, one entry per realization)."""
+    def bad(key, what):
+        raise CheckpointError(f"{path}: host.{key}: {what}")
+
+    if not isinstance(host, dict):
+        raise CheckpointError(f"{path}: header.host: missing or not a table")
+    t = host.get("t")
+    if not _is_real(t) or t < 0:
+        bad("t", f"must be a finite time >= 0, got {t!r}")
+    for key in ("steps", "history_overflows", "launches", "neighbor_builds"):
+        if not _is_int(host.get(key)) or host[key] < 0:
+            bad(key, f"must be an integer >= 0, got {host.get(key)!r}")
+    if not _is_real(host.get("next_series")) or host["next_series"] < 0:
+        bad("next_series", f"must be a finite time >= 0, got {host.get('next_series')!r}")
+    if not isinstance(host.get("any_running"), bool):
+        bad("any_running", f"must be true or false, got {host.get('any_running')!r}")
+    seeds = host.get("seeds")
+    if not isinstance(seeds, list) or not seeds or not all(_is_int(s) for s in seeds):
+        bad("seeds", "must be a non-empty list of integers")
+    R = len(seeds)
+    for key in ("rngs", "results"):
+        if not isinstance(host.get(key), list) or len(host[key]) != R or not all(
+                isinstance(v, dict) for v in host[key]):
+            bad(key, f"must hold one record per realization ({R})")
+    for k, state in enumerate(host["rngs"]):
+        try:
+            np.random.default_rng().bit_generator.state = state
+        except (TypeError, ValueError, KeyError, AttributeError, OverflowError) as exc:
+            bad(f"rngs[{k}]", f"not a random-number generator state ({_reason(exc)})")
+    for k, res in enumerate(host["results"]):
+        if set(res) != set(RESULT_KEYS):
+            bad(f"results[{k}]", f"must have exactly the keys {sorted(RESULT_KEYS)}")
+        kinds = {"seed": _is_int, "escapees": _is_int, "clogged": lambda v: isinstance(v, bool),
+                 "t_clog": _is_real, "t_stop": _is_real,
+                 "status": lambda v: v in RESULT_STATUSES,
+                 "reason": lambda v: isinstance(v, str)}
+        for key, check in kinds.items():
+            value = res[key]
+            if not (value is None and key != "status" and key != "seed") and not check(value):
+                bad(f"results[{k}].{key}", f"invalid value {value!r}")
+        if res["seed"] != seeds[k]:
+            bad(f"results[{k}].seed", f"{res['seed']} is not the realization's seed {seeds[k]}")
+        if (res["escapees"] or 0) < 0 or any(res[key] is not None and not 0 <= res[key] <= t
+                                              for key in ("t_clog", "t_stop")):
+            bad(f"results[{k}]", "a count below 0 or a time outside [0, host.t]")
+    series = host.get("series")
+    if not isinstance(series, list) or not all(
+            isinstance(row, list) and len(row) == 3 and _is_int(row[0]) and 0 <= row[0] < R
+            and _is_real(row[1]) and 0 <= row[1] <= t and _is_int(row[2]) and row[2] >= 0
+            for row in series):
+        bad("series", "must be rows [realization, t, escapees] with t in [0, host.t]")
+    caps = host.get("neighbor_caps")
+    if not isinstance(caps, list) or len(caps) != 2 or not all(
+            _is_int(c) and c >= 1 for c in caps):
+        bad("neighbor_caps", f"must be two integers >= 1, got {caps!r}")
+    for key in ("e0", "u_ref"):
+        value = host.get(key, ())
+        if value is not None and not (isinstance(value, list) and len(value) == R and all(
+                _is_real(v) and v >= 0 for v in value)):
+            bad(key, f"must be null or {R} finite numbers >= 0")
+    if "fluid" in host:
+        fl = host["fluid"]
+        if not isinstance(fl, dict) or not all(
+                _is_int(fl.get(k)) and fl[k] >= 0 for k in ("updates", "solves")) or not (
+                _is_real(fl.get("seconds")) and fl["seconds"] >= 0):
+            bad("fluid", "must hold counters updates, solves >= 0 and seconds >= 0")
 
 
 def check_continuable(header: dict, scene, path) -> None:
@@ -152,39 +276,39 @@ def check_continuable(header: dict, scene, path) -> None:
 
 def restore(sim, path) -> dict:
     """Load the checkpoint at ``path`` into ``sim`` (built from the checkpoint's
-    scene); returns its header."""
+    scene); returns its header. Everything is read and checked before ``sim`` is
+    touched: :class:`CheckpointError` leaves it as it was."""
     path = Path(path)
     header = read_header(path)
     check_continuable(header, sim.scene, path)
     host = header["host"]
-    npr = backend.numpy_real()
+    _check_progress(host, sim, path)
+    arrays = _read_arrays(sim, path, host)
+    if sim.fluid is not None and not isinstance(host.get("fluid"), dict):
+        raise CheckpointError(f"{path}: host.fluid: missing, though the scene has a fluid")
     nl = sim.neighbors
     nl.cell_cap, nl.nbr_cap = host["neighbor_caps"]
     nl._alloc_cells()
     nl._alloc_nbr()
-    with np.load(path) as data:
-        for name, array in _device_arrays(sim).items():
-            value = data[name]
-            if tuple(value.shape) != tuple(array.to_numpy().shape):
-                raise CheckpointError(f"{path}: {name} has shape {value.shape}, not the "
-                                      "scene's: the checkpoint is of another set-up")
-            floating = np.issubdtype(value.dtype, np.floating)
-            array.from_numpy(value.astype(npr if floating else value.dtype))
-        sim.last_escape_t = data["host.last_escape_t"].copy()
-        sim.escaped_np = data["host.escaped"].copy()
-        if sim.fluid is not None:
-            fl = sim.fluid
-            fl.pressure = data["fluid.pressure"].copy()
-            fl.v_src = data["fluid.v_src"].copy()
-            fl.w_src = data["fluid.w_src"].copy()
-            if fl.past is not None:
-                fl.past.from_numpy(data["fluid.past"].astype(np.float64))
-            fl._kappa_solved = (data["fluid.kappa_solved"].copy()
-                                if "fluid.kappa_solved" in data else None)
-            fl.solver.restore({k[len("solver."):]: data[k] for k in data.files
-                               if k.startswith("solver.")})
-            fl.updates, fl.solves, fl.seconds = (host["fluid"][k] for k in
-                                                 ("updates", "solves", "seconds"))
+    npr = backend.numpy_real()
+    for name, array in _device_arrays(sim).items():
+        value = arrays[name]
+        floating = np.issubdtype(value.dtype, np.floating)
+        array.from_numpy(value.astype(npr if floating else value.dtype))
+    sim.last_escape_t = arrays["host.last_escape_t"]
+    sim.escaped_np = arrays["host.escaped"]
+    if sim.fluid is not None:
+        fl = sim.fluid
+        fl.pressure = arrays["fluid.pressure"]
+        fl.v_src = arrays["fluid.v_src"]
+        fl.w_src = arrays["fluid.w_src"]
+        if fl.past is not None:
+            fl.past.from_numpy(arrays["fluid.past"].astype(np.float64))
+        fl._kappa_solved = arrays.get("fluid.kappa_solved")
+        fl.solver.restore({k[len("solver."):]: v for k, v in arrays.items()
+                           if k.startswith("solver.")})
+        fl.updates, fl.solves, fl.seconds = (host["fluid"][k] for k in
+                                             ("updates", "solves", "seconds"))
     sim.t, sim.steps = float(host["t"]), int(host["steps"])
     for rng, state in zip(sim.rngs, host["rngs"]):
         rng.bit_generator.state = state
@@ -199,3 +323,95 @@ def restore(sim, path) -> dict:
     sim.e0 = None if host["e0"] is None else np.array(host["e0"])
     sim.u_ref = None if host["u_ref"] is None else np.array(host["u_ref"])
     return header
+
+
+def _check_progress(host, sim, path) -> None:
+    """The time and step count agree with each other and with the scene: ``t`` is
+    ``steps`` time steps and no later than ``run.t_end``; the seeds are the scene's."""
+    t, steps, dt, t_end = host["t"], host["steps"], sim.dt, sim.scene.run.t_end
+    if host["seeds"] != list(sim.seeds):
+        raise CheckpointError(f"{path}: host.seeds: {host['seeds']} are not the scene's "
+                              f"{list(sim.seeds)}")
+    # t is dt summed steps times: its round-off stays far below a part in 1e6.
+    if abs(t - steps * dt) > 1e-6 * steps * dt + 0.5 * dt:
+        raise CheckpointError(f"{path}: host.t = {t!r} s is not host.steps = {steps} steps "
+                              f"of dt = {dt:g} s")
+    if t > t_end + 0.5 * dt:
+        raise CheckpointError(f"{path}: the checkpoint is at t = {t:.6g} s, past run.t_end "
+                              f"= {t_end:.6g} s: --set run.t_end to {t:.6g} or later")
+    # The neighbour capacities only grow by doubling from the first ones while a
+    # rebuild overflows, and never past what N bodies can fill.
+    caps = host["neighbor_caps"]
+    nl = sim.neighbors
+    if any(c > max(2 * sim.N, 16, nl.cell_cap, nl.nbr_cap) for c in caps):
+        raise CheckpointError(f"{path}: host.neighbor_caps: {caps} exceed what "
+                              f"{sim.N} bodies can fill")
+
+
+# Arrays whose values must be finite in every realization that has not gone
+# unstable (an unstable one keeps the state it failed in, for the record).
+_FINITE = {f"bodies.{k}" for k in ("x", "theta", "v", "omega", "force", "torque", "f_fluid",
+                                    "tau_fluid", "f_ext", "tau_ext")} | {
+    "neighbors.x_ref", "fluid.vs", "fluid.ws", "fluid.v_src", "fluid.w_src",
+    "host.last_escape_t", "batch.max_overlap"}
+
+
+def _read_arrays(sim, path, host) -> dict:
+    """Every array of the checkpoint, each checked against what ``sim`` holds: present,
+    of its dtype and shape (the neighbour lists at the saved capacities), finite where
+    a value must be, and indices inside the batch."""
+    R, N = sim.R, sim.N
+    cell_cap, nbr_cap = host["neighbor_caps"]
+    expected = {name: a.to_numpy() for name, a in _device_arrays(sim).items()}
+    for name, cap in (("neighbors.cell_p", cell_cap), ("neighbors.nbr", nbr_cap)):
+        expected[name] = np.zeros(expected[name].shape[:-1] + (cap,), expected[name].dtype)
+    expected["host.last_escape_t"] = sim.last_escape_t
+    expected["host.escaped"] = sim.escaped_np
+    if sim.fluid is not None:
+        fl = sim.fluid
+        expected["fluid.pressure"] = np.zeros((R, *sim.model.fluid_shape))
+        expected["fluid.v_src"], expected["fluid.w_src"] = fl.v_src, fl.w_src
+        if fl.past is not None:
+            expected["fluid.past"] = fl.past.to_numpy()
+        expected.update({f"solver.{k}": v for k, v in fl.solver.state().items()})
+    optional = {"fluid.kappa_solved": expected.get("fluid.kappa")}
+    arrays = {}
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            extra = set(data.files) - set(expected) - set(optional) - {"header"}
+            if extra:
+                raise CheckpointError(f"{path}: arrays {sorted(extra)} are not of this scene's "
+                                      "set-up")
+            for name in [*expected, *(k for k in optional if k in data.files)]:
+                ref = expected.get(name, optional.get(name))
+                if ref is None:
+                    raise CheckpointError(f"{path}: {name} is not of this scene's set-up")
+                if name not in data.files:
+                    raise CheckpointError(f"{path}: {name}: missing")
+                value = data[name]
+                if value.dtype != ref.dtype or value.shape != ref.shape:
+                    raise CheckpointError(f"{path}: {name}: {value.dtype} {value.shape}, not "
+                                          f"the scene's {ref.dtype} {ref.shape}")
+                arrays[name] = value
+    except CheckpointError:
+        raise
+    except (*_UNREADABLE, RecursionError) as exc:
+        raise CheckpointError(f"{path}: not a readable checkpoint ({_reason(exc)})") from None
+    fine = np.array([res["status"] != "unstable" for res in host["results"]]) & (
+        arrays["batch.bad"] == 0)
+    for name in _FINITE & set(arrays):
+        if not np.isfinite(arrays[name][fine]).all():
+            raise CheckpointError(f"{path}: {name}: NaN or infinite values in a realization "
+                                  "that was running fine")
+    t = host["t"]
+    bounds = {"bodies.alive": (0, 1), "batch.running": (0, 1), "batch.escaped": (0, None),
+              "host.escaped": (0, None), "neighbors.cell_p": (0, N - 1),
+              "neighbors.nbr": (0, N - 1), "neighbors.cell_n": (0, N),
+              "neighbors.nbr_n": (0, N), "history.0.partners": (0, N + 1),
+              "history.1.partners": (0, N + 1), "host.last_escape_t": (0, t)}
+    for name, (low, high) in bounds.items():
+        value = arrays[name]
+        if value.size and (value.min() < low or (high is not None and value.max() > high)):
+            raise CheckpointError(f"{path}: {name}: values outside [{low}, "
+                                  f"{'inf' if high is None else high}]")
+    return arrays

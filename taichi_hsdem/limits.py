@@ -33,6 +33,20 @@ HISTORY_SLOT_BYTES = 2 * (4 + 16)    # shear history: two buffers of (partner, 2
 MEMORY_FRACTION = 0.8
 #: More DEM steps than this can not finish (the paper's runs take 2e7).
 MAX_STEPS = 1.0e10
+#: Most vertices of one particle polygon: each is at least one surface node, and
+#: the level set, the overlap checks and every contact grow with them (a
+#: 3000-vertex polygon took minutes before the first step).
+MAX_PARTICLE_VERTICES = 1000
+#: Most vertices of a channel outline and its obstacles together: the scene check
+#: and the wall level set grow with their square and product (6000 took minutes).
+MAX_OUTLINE_VERTICES = 2000
+#: Most surface nodes of one particle template: every contact of the particle
+#: tests each node (the automatic count is 40 to a few hundred).
+MAX_NODES = 20000
+#: Most video frames (9 hours at 30 frames per second) and the widest video (8K):
+#: each frame is drawn and encoded, at width x height pixels.
+MAX_FRAMES = 1_000_000
+MAX_VIDEO_WIDTH = 7680
 #: A process's share of the cores, when something (a Dask worker) gave it one:
 #: Taichi's CPU threads and the pressure solver's processes stay within it.
 THREADS_ENV = "TAICHI_HSDEM_THREADS"
@@ -55,19 +69,49 @@ class Part:
 
 
 def available_memory() -> int | None:
-    """Memory this process could still allocate, bytes (Linux ``MemAvailable``,
-    else the free physical pages); None where neither can be read."""
+    """Memory this process could still allocate, bytes: the machine's (Linux
+    ``MemAvailable``, else the free physical pages), or less where an address-space
+    limit (``ulimit -v``) leaves less; None where neither can be read."""
+    machine = None
     try:
         with open("/proc/meminfo") as fh:
             for line in fh:
                 if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
+                    machine = int(line.split()[1]) * 1024
+                    break
+    except (OSError, ValueError, IndexError):
         pass
+    if machine is None:
+        try:
+            machine = int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+        except (AttributeError, OSError, ValueError):
+            pass
+    limit = _address_space_left()
+    if limit is None:
+        return machine
+    return limit if machine is None else min(machine, limit)
+
+
+def _address_space_left() -> int | None:
+    """Address space this process may still map under ``RLIMIT_AS`` (its limit less
+    its current size, ``VmSize``), bytes; None without a limit or where unknown."""
     try:
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, OSError, ValueError):
+        import resource
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+    except (ImportError, OSError, ValueError):
         return None
+    if soft == resource.RLIM_INFINITY:
+        return None
+    size = 0
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmSize:"):
+                    size = int(line.split()[1]) * 1024
+                    break
+    except (OSError, ValueError, IndexError):
+        pass
+    return max(0, soft - size)
 
 
 def human_bytes(n: float) -> str:
@@ -89,7 +133,7 @@ def memory_problems(parts: list[Part], source: str, available: int | None = None
     --------
     >>> memory_problems([Part("fluid.cell_size", "a grid", 5e12, "raise it")], "s.toml",
     ...                 available=16e9)                            # doctest: +ELLIPSIS
-    ['s.toml: fluid.cell_size: a grid would need about 5e+03 GB ...']
+    ['s.toml: fluid.cell_size: a grid would need about 5 TB, more than the 16 GB ...']
     """
     available = available_memory() if available is None else available
     total = sum(p.nbytes for p in parts)

@@ -147,3 +147,35 @@ def test_any_override_gives_an_answer_not_a_traceback(base, sets, bad_end, tmp_p
         assert lines, f"exit {code} without a message"
     assert "Traceback" not in err, err
     assert seconds < MAX_SECONDS, (seconds, args)
+
+
+# ------------------------------------------------- the whole command line (tools/fuzz_cli.py)
+
+FUZZ_CASES = int(os.environ.get("TAICHI_HSDEM_FUZZ_CASES", "150"))
+
+
+def _fuzz_cli():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        "fuzz_cli", Path(__file__).resolve().parents[1] / "tools" / "fuzz_cli.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_seeded_command_line_fuzz(tmp_path):
+    """150 seeded cases of every family (overrides, extreme combinations, TOML edge
+    cases, bad polygons, corrupted and foreign checkpoints, odd paths, argument
+    garbage, Ctrl-C at a random moment), a few of them run for real: every case
+    answers 0, 1, 2 or 130 with a message, no traceback, and no complete-looking
+    result from a failed run. The 2000-case run: ``nice -n 10 python
+    tools/fuzz_cli.py``."""
+    fuzz = _fuzz_cli()
+    t0 = time.perf_counter()
+    res = fuzz.run_cases(FUZZ_CASES, seed=0, valid_runs=4, work=tmp_path)
+    assert not res["failures"], fuzz.report(res)
+    assert set(res["codes"]) <= {0, 1, 2, 130, "valid, not run"}
+    assert set(res["families"]) == {"overrides", "combination", "toml", "polygon", "resume",
+                                    "paths", "argv", "interrupt"}
+    assert res["codes"][2] > FUZZ_CASES // 2 and res["runs"] >= 4    # refusals, and real runs
+    assert time.perf_counter() - t0 < 120

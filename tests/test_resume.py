@@ -4,6 +4,7 @@ inlet and re-feeding; squares on the level-set per-step path), also when a
 finished run is extended to a later t_end; a checkpoint of other code or another
 scene is refused."""
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -141,3 +142,135 @@ def test_ctrl_c_keeps_results_and_a_checkpoint_that_resumes(tmp_path):
     assert done["realizations"] == straight["realizations"]
     assert (out / "escapees.csv").read_text() == (ref / "escapees.csv").read_text()
 
+
+
+# --------------------------------------------------------- damaged or edited checkpoints
+
+HOURGLASS = ROOT / "scenes" / "hourglass24.toml"
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """A run's output folder with a checkpoint at its end (t = 0.2 of 0.2 s)."""
+    out = tmp_path_factory.mktemp("ck") / "run"
+    assert main([str(HOURGLASS), "--out", str(out), "--quiet", "--set", "run.t_end=0.2"]) == 0
+    return out
+
+
+def _arrays(folder):
+    with np.load(folder / checkpoint.FILE) as data:
+        return {k: data[k] for k in data.files}
+
+
+def _header(arrays):
+    return json.loads(bytes(arrays["header"]).decode())
+
+
+def _set_header(arrays, header):
+    arrays["header"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+
+
+def _edit_host(key, value):
+    def edit(a):
+        h = _header(a)
+        h["host"][key] = value
+        _set_header(a, h)
+    return edit
+
+
+def _edit_header(key, value):
+    def edit(a):
+        h = _header(a)
+        h[key] = value(h[key]) if callable(value) else value
+        _set_header(a, h)
+    return edit
+
+
+def _set_item(name, index, value):
+    return lambda a: a[name].__setitem__(index, value)
+
+
+# (name, how the arrays are edited, a phrase the one line must hold)
+EDITS = [
+    ("missing array", lambda a: a.pop("bodies.x"), "bodies.x: missing"),
+    ("wrong dtype", lambda a: a.update({"bodies.x": a["bodies.x"].astype(np.float32)}),
+     "bodies.x: float32"),
+    ("wrong shape", lambda a: a.update({"bodies.v": a["bodies.v"][:, :3]}),
+     "bodies.v: float64 (1, 3, 2)"),
+    ("foreign array", lambda a: a.update({"extra": np.zeros(3)}), "not of this scene"),
+    ("NaN position", _set_item("bodies.x", (0, 0, 0), np.nan), "bodies.x: NaN or infinite"),
+    ("index out of range", _set_item("neighbors.nbr", (0, 0, 0), 10 ** 9),
+     "neighbors.nbr: values outside"),
+    ("absurd capacities", _edit_host("neighbor_caps", [10 ** 9, 10 ** 9]),
+     "neighbor_caps"),
+    ("NaN time", _edit_host("t", float("nan")), "host.t: must be a finite time"),
+    ("infinite time", _edit_host("t", float("inf")), "host.t: must be a finite time"),
+    ("negative time", _edit_host("t", -1.0), "host.t: must be a finite time"),
+    ("time 1e300", _edit_host("t", 1e300), "is not host.steps"),
+    ("negative steps", _edit_host("steps", -7), "host.steps: must be an integer >= 0"),
+    ("steps beyond the time", _edit_host("steps", 10 ** 6), "is not host.steps"),
+    ("results", _edit_host("results", [{}]), "host.results[0]"),
+    ("random state", _edit_host("rngs", [{"state": 5}]), "host.rngs[0]"),
+    ("series", _edit_host("series", [[7, 0.0, 0]]), "host.series"),
+    ("no host", _edit_header("host", None), "header.host"),
+    ("format", _edit_header("format", 99), "format 99"),
+    ("scene not TOML", _edit_header("scene", "[[[ x"), "the scene inside is not TOML"),
+    ("scene nested", _edit_header("scene", "x = " + "[" * 100000),
+     "the scene inside is not TOML"),
+    ("scene invalid", _edit_header("scene", lambda s: s.replace("friction = 0.4",
+                                                                "friction = -3.0", 1)),
+     "particles[0].friction: must be >= 0"),
+    ("other code", _edit_header("code", "0" * 64), "written by other code"),
+]
+
+
+@pytest.mark.parametrize("edit, phrase", [e[1:] for e in EDITS], ids=[e[0] for e in EDITS])
+def test_edited_checkpoint_is_refused_in_one_line(finished, edit, phrase, tmp_path, capsys):
+    folder = tmp_path / "run"
+    shutil.copytree(finished, folder)
+    arrays = _arrays(finished)
+    edit(arrays)
+    with open(folder / checkpoint.FILE, "wb") as fh:
+        np.savez(fh, **arrays)
+    before = (folder / "summary.json").read_bytes()
+    assert main(["--resume", str(folder), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"--resume: {folder / checkpoint.FILE}: "), err
+    assert phrase in err, err
+    assert (folder / "summary.json").read_bytes() == before      # nothing written
+
+
+@pytest.mark.parametrize("damage, phrase", [
+    (lambda b: b[:len(b) // 2], "not a complete .npz archive"),
+    (lambda b: b"", "not a complete .npz archive"),
+    (lambda b: b"\x93NUMPY" + b[6:], "not a readable checkpoint"),
+    (lambda b: b[:len(b) // 3] + bytes([b[len(b) // 3] ^ 0xFF]) + b[len(b) // 3 + 1:],
+     "Bad CRC-32"),
+], ids=["truncated", "empty", "npy magic", "CRC error"])
+def test_damaged_checkpoint_file_is_refused_in_one_line(finished, damage, phrase, tmp_path,
+                                                        capsys):
+    folder = tmp_path / "run"
+    shutil.copytree(finished, folder)
+    path = folder / checkpoint.FILE
+    path.write_bytes(damage(path.read_bytes()))
+    assert main(["--resume", str(folder), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and phrase in err and "Traceback" not in err, err
+
+
+def test_resume_to_an_earlier_t_end_is_refused(finished, tmp_path, capsys):
+    folder = tmp_path / "run"
+    shutil.copytree(finished, folder)
+    assert main(["--resume", str(folder), "--quiet", "--set", "run.t_end=0.1"]) == 2
+    err = capsys.readouterr().err
+    assert "past run.t_end = 0.1 s" in err and err.count("\n") == 1, err
+
+
+def test_result_fields_are_the_simulations(finished):
+    # the checkpoint checks each result record's keys without importing the simulator
+    import dataclasses
+
+    from taichi_hsdem.simulation import RealizationResult
+    assert checkpoint.RESULT_KEYS == tuple(f.name for f in dataclasses.fields(RealizationResult))
+    results = _header(_arrays(finished))["host"]["results"]
+    assert [tuple(r) for r in results] == [checkpoint.RESULT_KEYS]

@@ -87,6 +87,37 @@ def segments_intersect(p1, p2, q1, q2, tol: float = 0.0, touching: bool = True) 
     return proper | touch
 
 
+def first_crossing(poly, tol: float = 0.0) -> tuple[int, int] | None:
+    """The first pair ``(i, j)``, ``i < j`` in row order, of non-adjacent edges of the
+    closed polygon ``poly`` that cross or touch (within ``tol``), or None when it is
+    simple. Edge ``i`` runs from vertex ``i`` to ``i + 1``.
+
+    Vectorised over blocks of ``CHUNK_ELEMENTS`` pairs: a 6000-vertex outline takes
+    seconds, where a pair-by-pair loop took minutes.
+
+    Examples
+    --------
+    >>> first_crossing([[0, 0], [2, 0], [0, 2], [2, 2]])     # a bow tie
+    (1, 3)
+    >>> first_crossing([[0, 0], [1, 0], [0, 1]]) is None
+    True
+    """
+    a = np.asarray(poly, dtype=float)
+    b = np.roll(a, -1, axis=0)
+    n = len(a)
+    rows = max(1, CHUNK_ELEMENTS // max(n, 1))
+    for start in range(0, n - 2, rows):
+        i = np.arange(start, min(start + rows, n - 2))[:, None]
+        j = np.arange(start + 2, n)[None, :]
+        # non-adjacent: j >= i + 2, and not the closing pair (0, n - 1)
+        wanted = (j >= i + 2) & ~((i == 0) & (j == n - 1))
+        hit = segments_intersect(a[i], b[i], a[j], b[j], tol) & wanted
+        if hit.any():
+            r, c = np.unravel_index(int(np.argmax(hit)), hit.shape)
+            return int(i[r, 0]), int(j[0, c])
+    return None
+
+
 def _on_segment(p, a, b, d, tol):
     """p within tol of the line through a, b (d: its signed distance) and inside the box."""
     lo, hi = np.minimum(a, b) - tol, np.maximum(a, b) + tol

@@ -2,7 +2,7 @@
 
 A shape template is a rigid 2D outline in its own *body frame*: the centroid is at
 the origin and polygon vertices run counter-clockwise. From it this module derives
-what the rest of the method needs (MODEL.md section 1):
+what the rest of the method needs (docs/model.md section 1):
 
 * the mass properties (area, polar moment of area about the centroid), so that a
   particle's mass and inertia come from its shape instead of being assumed;

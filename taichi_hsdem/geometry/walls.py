@@ -1,7 +1,7 @@
 """Channel walls: the fluid region, its signed distance and the gridded wall level set.
 
 The fluid region is a simple polygon, the *outline*, minus solid islands, the
-*obstacles* (MODEL.md section 1: "Walls (channel outline, constriction) are a
+*obstacles* (docs/model.md section 1: "Walls (channel outline, constriction) are a
 static level set on a fixed grid"). The outline's edges on ``x = x_min`` are the
 inlet and those on ``x = x_max`` the outlet: they are open, every other edge is a
 wall.
@@ -34,8 +34,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .polygon import (CHUNK_ELEMENTS, clipped_area, cross, crossings, points_in_polygon,
-                      segments_intersect, signed_area)
+from .polygon import (CHUNK_ELEMENTS, clipped_area, cross, crossings, first_crossing,
+                      points_in_polygon, segments_intersect, signed_area)
 
 # Relative tolerance of "same width" / "same x" against the geometry's size:
 # outlines are built from sums and products of the user's numbers, exact to a
@@ -538,17 +538,12 @@ def _edges(poly: np.ndarray):
 
 
 def _check_simple(poly: np.ndarray, what: str, tol: float) -> None:
-    a, b = _edges(poly)
-    n = len(poly)
-    i, j = np.triu_indices(n, k=2)
-    non_adjacent = ~((i == 0) & (j == n - 1))
-    i, j = i[non_adjacent], j[non_adjacent]
-    hit = segments_intersect(a[i], b[i], a[j], b[j], tol)
-    if hit.any():
-        k = int(np.flatnonzero(hit)[0])
-        p = a[i[k]]
-        raise ValueError(f"{what}: edges {i[k]} and {j[k]} (from vertex ({p[0]:g}, {p[1]:g})) "
-                         f"cross or touch; the polygon must be simple (no self-intersections)")
+    pair = first_crossing(poly, tol)
+    if pair is not None:
+        p = poly[pair[0]]
+        raise ValueError(f"{what}: edges {pair[0]} and {pair[1]} (from vertex ({p[0]:g}, "
+                         f"{p[1]:g})) cross or touch; the polygon must be simple (no "
+                         "self-intersections)")
 
 
 def _distance_to_pieces(points, start, unit, length) -> np.ndarray:

@@ -160,7 +160,9 @@ def _resolve(scene: Scene, arch: str) -> Model:
         region = tuple(geom.upstream_region)
         res.note("feed.region", list(region), "the straight section upstream of the "
                  "constriction")
-    _check_feed(res, geom, "feed.region", region, d_max)
+    if scene.feed.mode == "count" or any(sp.positions is None for sp in scene.particles):
+        # the region places particles (none when every species gives its positions)
+        _check_feed(res, geom, "feed.region", region, d_max)
     res.stop_if_bad()
     for k, (sp, t, kp) in enumerate(zip(scene.particles, templates, kps)):
         key = f"particles[{k}]"
@@ -220,6 +222,12 @@ def _resolve(scene: Scene, arch: str) -> Model:
                               f"critical) or dt = \"auto\""])
     _check_steps(res, scene, dt)
     res.stop_if_bad()
+    # A frame per step at most: more would draw (and encode) the same state again and
+    # again (a million frames over 5 steps took hours).
+    steps = int(math.ceil(scene.run.t_end / dt - 0.5))
+    if scene.output.frames > steps + 1:
+        res.note("output.frames", steps + 1, f"one frame per step: the {scene.output.frames} "
+                 f"frames asked would repeat the states of the run's {steps} steps")
 
     # Memory of everything the run allocates, before any of it is.
     nx = ny = 0

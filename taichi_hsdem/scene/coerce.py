@@ -131,23 +131,32 @@ def _coerce_pose(value: Any, key: str, out: Problems):
 
 
 def _coerce_array(value: Any, key: str, out: Problems, item, what: str,
-                  min_len: int = 0, unit: str = "entries"):
-    """A tuple of ``item(entry, "key[i]", out)`` for an array ``value`` of at least
-    ``min_len`` entries, or BAD after reporting why not."""
+                  min_len: int = 0, unit: str = "entries", max_len: int | None = None):
+    """A tuple of ``item(entry, "key[i]", out)`` for an array ``value`` of
+    ``min_len`` to ``max_len`` entries, or BAD after reporting why not (the first
+    bad entry only: a huge array of bad entries is one line, not a line each)."""
     if not isinstance(value, (list, tuple)):
         out.add(key, f"expected an array of {what}, got {describe(value)}")
         return BAD
-    items = tuple(item(p, f"{key}[{i}]", out) for i, p in enumerate(value))
-    if BAD in items:
+    if max_len is not None and len(value) > max_len:
+        out.add(key, f"has {len(value)} {unit}, more than the {max_len} a run can afford "
+                     "(its set-up and every contact grow with them); simplify it")
         return BAD
+    items = []
+    for i, p in enumerate(value):
+        items.append(item(p, f"{key}[{i}]", out))
+        if items[-1] is BAD:
+            return BAD
     if len(items) < min_len:
         out.add(key, f"needs at least {min_len} {unit}, got {len(items)}")
         return BAD
-    return items
+    return tuple(items)
 
 
-def _coerce_points(value: Any, key: str, min_len: int, out: Problems):
-    return _coerce_array(value, key, out, _coerce_point, "[x, y] pairs", min_len, "vertices")
+def _coerce_points(value: Any, key: str, min_len: int, out: Problems,
+                   max_len: int | None = None):
+    return _coerce_array(value, key, out, _coerce_point, "[x, y] pairs", min_len, "vertices",
+                         max_len)
 
 
 def _coerce(value: Any, spec: Spec, key: str, out: Problems) -> Any:
@@ -199,13 +208,14 @@ def _coerce(value: Any, spec: Spec, key: str, out: Problems) -> Any:
             return BAD
         return value
     if kind == "points":
-        return _coerce_points(value, key, spec.min_len, out)
+        return _coerce_points(value, key, spec.min_len, out, spec.max_len)
     if kind == "poses":
         return _coerce_array(value, key, out, _coerce_pose, "[x, y] or [x, y, theta]",
                              spec.min_len)
     if kind == "polygons":
         return _coerce_array(value, key, out,
-                             lambda p, where, o: _coerce_points(p, where, 3, o), "polygons")
+                             lambda p, where, o: _coerce_points(p, where, 3, o, spec.max_len),
+                             "polygons", max_len=spec.max_len)
     # interval
     if (isinstance(value, (list, tuple)) and len(value) == 2
             and all(_is_real(c) and math.isfinite(c) for c in value)):

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
 from ..geometry.polygon import signed_area
+from ..limits import (MAX_FRAMES, MAX_NODES, MAX_OUTLINE_VERTICES, MAX_PARTICLE_VERTICES,
+                      MAX_VIDEO_WIDTH)
 
 AUTO = "auto"
 #: Packing fractions of all species together must stay below this (docs/scene.md).
@@ -55,6 +57,7 @@ class Spec:
     le: float | None = None
     choices: tuple[str, ...] = ()
     min_len: int = 0
+    max_len: int | None = None  # arrays: most entries (points: vertices) the run can afford
     only: tuple[str, ...] = ()  # used only by these geometry kinds / particle shapes
 
 
@@ -162,7 +165,7 @@ class FluidConfig(Config):
     particle_flux: bool | str = keyfield("bool", "conserve the mixture: moving particles "
                                         "carry their volume (div((kappa/eta) grad p) = "
                                         "div(chi v)); false: fluid alone, particles as fixed "
-                                        'obstacles (MODEL.md); "auto": true where the pressure '
+                                        'obstacles (docs/model.md); "auto": true where the pressure '
                                         'solve is "gmg", which holds the implicit coupling, '
                                         'else false', AUTO, auto=True)
     flux_coupling: str = keyfield("choice", "how the particles' carried volume enters the "
@@ -222,10 +225,10 @@ class GeometryConfig(Config):
     # kind = "polygon"
     outline: tuple[tuple[float, float], ...] | None = keyfield(
            "points", "the fluid region, a simple polygon of [x, y] vertices, m",
-           required=True, min_len=3, only=_POLYGON)
+           required=True, min_len=3, max_len=MAX_OUTLINE_VERTICES, only=_POLYGON)
     obstacles: tuple[tuple[tuple[float, float], ...], ...] | None = keyfield(
            "polygons", "solid islands inside the outline, polygons of [x, y], m", (),
-           only=_POLYGON)
+           max_len=MAX_OUTLINE_VERTICES, only=_POLYGON)
     constriction_x: float | None = keyfield("float", "where escape is measured from, m "
                                            "(None: x of the narrowest section, resolved "
                                            "by the run)", only=_POLYGON)
@@ -254,10 +257,10 @@ class SpeciesConfig(Config):
     height: float | None = keyfield("float", "rectangle height, m", required=True, gt=0,
                                    only=_RECT)
     n_vertices: int | None = keyfield("int", "vertices of a regular polygon", required=True,
-                                     ge=3, only=_REGULAR)
+                                     ge=3, le=MAX_PARTICLE_VERTICES, only=_REGULAR)
     vertices: tuple[tuple[float, float], ...] | None = keyfield(
            "points", "body-frame outline [x, y] (recentred on its centroid by the run), m",
-           required=True, min_len=3, only=("polygon",))
+           required=True, min_len=3, max_len=MAX_PARTICLE_VERTICES, only=("polygon",))
     count: int | None = keyfield("int", "particles in the control volume (or "
                                 "packing_fraction, or positions)", ge=0)
     positions: tuple[tuple[float, float, float], ...] | None = keyfield(
@@ -280,7 +283,7 @@ class SpeciesConfig(Config):
     nodes: int | str = keyfield("int", 'surface nodes (at least the shape\'s vertices); '
                                '"auto": at most perimeter / 40 apart, and half the thinnest '
                                "part of the scene's particles, on every edge", AUTO,
-                               auto=True, ge=3)
+                               auto=True, ge=3, le=MAX_NODES)
     ls_spacing: float | str = keyfield("float", 'level-set grid spacing, m; "auto": d_eq '
                                       "/ 40, finer where the thinnest part would span "
                                       "fewer than 8 cells", AUTO, auto=True, gt=0)
@@ -358,9 +361,10 @@ class OutputConfig(Config):
     video_realization: int = keyfield("int", "which realization the video shows, < "
                                      "run.realizations", 0, ge=0)
     fps: int = keyfield("int", "video frame rate, 1/s", 30, ge=1)
-    frames: int = keyfield("int", "frames over t_end (frame 0 is the initial state)", 150,
-                          ge=2)
-    width: int = keyfield("int", "video width, pixels, even", 960, ge=64)
+    frames: int = keyfield("int", "frames over t_end (frame 0 is the initial state; at "
+                          "most one per step, the run records fewer where t_end has fewer "
+                          "steps)", 150, ge=2, le=MAX_FRAMES)
+    width: int = keyfield("int", "video width, pixels, even", 960, ge=64, le=MAX_VIDEO_WIDTH)
     series_interval: float = keyfield("float", "time between rows of escapees.csv, s "
                                      "(default t_end / 200)", gt=0)
     vtk: bool = keyfield("bool", "write a ParaView series (series.pvd: particle outlines, "

@@ -39,7 +39,8 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from ..geometry.polygon import cross, points_in_polygon, segments_intersect, signed_area
+from ..geometry.polygon import (cross, first_crossing, points_in_polygon, segments_intersect,
+                                signed_area)
 from .coerce import (
     MISSING,
     Problems,
@@ -72,6 +73,7 @@ from .keys import (
     shape_area,
     shape_vertex_count,
 )
+from ..limits import MAX_OUTLINE_VERTICES
 from .toml import parse_override_value, read_toml
 
 __all__ = ["Scene", "load_scene"]
@@ -132,6 +134,10 @@ class Scene(Config):
         return _build_scene(raw, self.source, self.name, origins)
 
 
+# What Linux file systems take: bytes per file or folder name, and per path.
+MAX_NAME_BYTES = 255
+MAX_PATH_BYTES = 4095
+
 _TOP_ORDER = ("name", "description", "units", "run", "fluid", "geometry", "particles",
               "contact", "damping", "feed", "clog", "output")
 
@@ -149,19 +155,15 @@ def _polygon_problem(points) -> str | None:
             return f"vertices {i} and {(i + 1) % n} coincide"
     if signed_area(points) == 0.0:
         return "the polygon has zero area"
-    edges = [(points[i], points[(i + 1) % n]) for i in range(n)]
     for i in range(n):
         # Adjacent edges share a vertex; they only fail by folding back on each other.
-        a, b = edges[i]
-        c = edges[(i + 1) % n][1]
+        a, b, c = points[i], points[(i + 1) % n], points[(i + 2) % n]
         if (cross(np.subtract(b, a), np.subtract(c, a)) == 0
                 and (b[0] - a[0]) * (c[0] - b[0]) + (b[1] - a[1]) * (c[1] - b[1]) < 0):
             return f"the edges at vertex {(i + 1) % n} fold back on each other"
-        for j in range(i + 2, n):
-            if i == 0 and j == n - 1:
-                continue
-            if segments_intersect(*edges[i], *edges[j]):
-                return f"edges {i} and {j} cross or touch: the polygon is not simple"
+    pair = first_crossing(points)
+    if pair is not None:
+        return f"edges {pair[0]} and {pair[1]} cross or touch: the polygon is not simple"
     return None
 
 
@@ -245,15 +247,22 @@ def _check_polygon_outline(v: dict, out: Problems) -> None:
                 f"({show(x_min)}, {show(x_max)}), got {show(v['constriction_x'])}")
     if not good(v["obstacles"]):
         return
-    edges = [(outline[i], outline[(i + 1) % n]) for i in range(n)]
+    total = n + sum(len(obstacle) for obstacle in v["obstacles"])
+    if total > MAX_OUTLINE_VERTICES:
+        out.add("geometry.obstacles", f"the outline and obstacles have {total} vertices, "
+                f"more than the {MAX_OUTLINE_VERTICES} a run can afford (the wall level set "
+                "and these checks grow with them); simplify them")
+        return
+    a, b = np.asarray(outline), np.roll(outline, -1, axis=0)
     for k, obstacle in enumerate(v["obstacles"]):
         key = f"geometry.obstacles[{k}]"
         problem = _polygon_problem(obstacle)
         if problem:
             out.add(key, problem)
-        elif not points_in_polygon(obstacle, outline).all() or any(
-                segments_intersect(a, b, obstacle[i], obstacle[(i + 1) % len(obstacle)])
-                for a, b in edges for i in range(len(obstacle))):
+            continue
+        c, d = np.asarray(obstacle), np.roll(obstacle, -1, axis=0)
+        if not points_in_polygon(obstacle, outline).all() or segments_intersect(
+                a[:, None], b[:, None], c[None], d[None]).any():
             out.add(key, "must lie strictly inside geometry.outline")
 
 
@@ -306,10 +315,19 @@ def _check_scene(scene: dict, species: dict[int, dict], shapes: dict[int, Any],
                         or any(c in name for c in "/\\\0")):
         out.add("name", f"must be a non-empty folder name without / or \\, got "
                         f"{show(name)}")
-    if output["dir"] is None and good(name):
+    elif good(name) and len(name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
+        out.add("name", f"is {len(name.encode('utf-8', 'surrogatepass'))} bytes long; it "
+                        f"names the default output folder runs/<name>, and a file system "
+                        f"takes at most {MAX_NAME_BYTES} bytes per folder name")
+    elif output["dir"] is None and good(name):
         output["dir"] = f"runs/{name}"
     if good(output["dir"]) and (not output["dir"].strip() or "\0" in output["dir"]):
         out.add("output.dir", f"must be a folder path, got {show(output['dir'])}")
+    elif good(output["dir"]):
+        parts = [p.encode("utf-8", "surrogatepass") for p in Path(output["dir"]).parts]
+        if any(len(p) > MAX_NAME_BYTES for p in parts) or sum(map(len, parts)) > MAX_PATH_BYTES:
+            out.add("output.dir", f"a folder name longer than {MAX_NAME_BYTES} bytes, or a "
+                                  f"path longer than {MAX_PATH_BYTES}: no file system takes it")
     if good(run["t_end"]):
         if clog["window"] is None:
             clog["window"] = 0.1 * run["t_end"]

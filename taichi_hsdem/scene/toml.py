@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import numbers
 import re
+import stat
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -60,15 +61,24 @@ def toml_key(key: str) -> str:
     return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else toml_string(key)
 
 
+#: The largest scene file read: real scenes are a few kB (a 1000-vertex polygon
+#: is about 40 kB); past this a file is not a scene (``/dev/zero``, a log).
+MAX_SCENE_BYTES = 16 * 2 ** 20
+
+
 def parse_toml(text: str) -> dict:
-    """TOML text as a dict (``tomllib.TOMLDecodeError`` when it is not TOML)."""
-    return tomllib.loads(text)
+    """TOML text as a dict (``tomllib.TOMLDecodeError`` when it is not TOML, also
+    for arrays nested too deep for the parser's recursion)."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise tomllib.TOMLDecodeError("arrays or tables nested too deep") from None
 
 
 def parse_override_value(text: str) -> Any:
     """A TOML value, or the text itself when it is not one (``flow_rate``)."""
     try:
-        parsed = tomllib.loads(f"v = {text}")
+        parsed = parse_toml(f"v = {text}")
     except tomllib.TOMLDecodeError:
         return text
     return parsed["v"] if list(parsed) == ["v"] else text
@@ -79,19 +89,33 @@ def read_toml(path: Path, what: str = "scene", error: type = None) -> dict:
     :class:`SceneError`) with one line naming the file (``what`` it should be)."""
     error = error or SceneError
     try:
-        data = path.read_bytes()
+        try:
+            info = path.stat()
+        except ValueError:              # os.stat refuses a NUL in the path
+            raise error(f"{str(path)!r}: not a file name (it holds a NUL character)") from None
+        if stat.S_ISDIR(info.st_mode):
+            raise IsADirectoryError
+        # A device or FIFO would be read forever (/dev/zero) or block (a pipe).
+        if not stat.S_ISREG(info.st_mode):
+            raise error(f"{path}: not a regular file (a device, pipe or socket); give a "
+                        f"{what} file")
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_SCENE_BYTES + 1)
     except FileNotFoundError:
         raise error(f"{path}: file not found") from None
     except IsADirectoryError:
         raise error(f"{path}: is a folder, not a {what} file") from None
     except OSError as exc:
         raise error(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if len(data) > MAX_SCENE_BYTES:
+        raise error(f"{path}: larger than {MAX_SCENE_BYTES // 2 ** 20} MB: not a {what} "
+                    "file (a scene is a few kB)")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise error(f"{path}: not UTF-8 text (byte {exc.start})") from None
     try:
-        return tomllib.loads(text)
+        return parse_toml(text)
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{path}: invalid TOML: {exc}") from None
 

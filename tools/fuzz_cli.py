@@ -1,0 +1,587 @@
+"""Fuzz the command line: seeded cases over the whole argument and scene space,
+each run in-process through ``taichi_hsdem.cli.main(argv)``.
+
+Families: ``--set`` overrides (values inside, at and past every documented range,
+wrong types, extreme-but-valid combinations); TOML edge cases (duplicate keys,
+control characters, deep nesting, huge arrays, cut or flipped bytes); bad
+polygons (self-intersecting, zero-area, collinear, too many vertices) for
+particles, outlines and obstacles; ``--resume`` on corrupted or foreign
+checkpoints (copies of one real checkpoint, made once); paths with odd
+characters (spaces, unicode, newlines, very long, dangling links, link loops);
+and argument garbage.
+
+A case passes when ``main`` returns 0, 1, 2 or 130, writes a message on stderr
+when not 0, shows no traceback or "internal error", lets no exception escape,
+and leaves no complete-looking result (``summary.json`` with status
+"complete") from a failed run. Valid scenes run for real, at most
+``--valid-runs`` of them and each cut to a few dozen steps; past that, a valid
+case is resolved (every check before the run) but not run. Interrupt cases
+(Ctrl-C after a random delay) always run, up to a few thousand steps.
+
+    nice -n 10 python tools/fuzz_cli.py --cases 2000 --seed 0
+
+prints a table (cases, exit codes, failures, wall time) and each failure with its
+arguments and stderr; exit status 1 when any case failed.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import math
+import os
+import random
+import shutil
+import signal
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from taichi_hsdem import checkpoint, runner  # noqa: E402
+from taichi_hsdem.cli import main  # noqa: E402
+from taichi_hsdem.scene.keys import SECTIONS, SpeciesConfig, key_specs  # noqa: E402
+
+SCENES = ROOT / "scenes"
+BASES = ["hourglass24", "vani_phi026", "squares", "polygons", "concave"]
+STEPS = 30            # DEM steps a valid run is cut to
+EXITS = (0, 1, 2, 130)
+# Keys whose large valid values only make a run long, not wrong: kept small.
+SIZE = {"run.realizations": 3, "particles.count": 30, "particles.nodes": 60,
+        "output.frames": 4, "output.fps": 30, "output.width": 128, "particles.n_vertices": 8}
+# Never fuzzed through --set: they start other machinery (video encoding, a window,
+# another backend); their own tests cover them.
+SKIP = {"output.video", "output.vtk", "run.arch", "run.precision"}
+EXTREMES = ["0", "-1", "1e-300", "1e300", "-1e300", "inf", "-inf", "nan", "5e-324", "1e-30",
+            "1e30", "2e308", "9223372036854775808", "-0.0", "1_000", "0x10", "1e-9", "1e9"]
+WRONG = ['"auto"', '"text"', "true", "[1.0, 2.0]", "[[0.0, 0.0]]", '"nan"', "{a = 1}", '""',
+         '"\\u0000"', "[[[[1]]]]", "1979-05-27", '"' + "x" * 5000 + '"', "[]", "'''a\nb'''"]
+
+
+class _Skip(BaseException):
+    """A valid case past the cap of real runs: resolved, not run (not an exception
+    the command line catches, so it comes back to the fuzzer)."""
+
+
+class Fuzzer:
+    def __init__(self, work: Path, seed: int, valid_runs: int):
+        self.work, self.rng, self.valid_runs = work, random.Random(seed), valid_runs
+        self.runs = 0
+        self.keys = [(f"{s}.{k}", spec) for s, cls in SECTIONS.items()
+                     for k, spec in key_specs(cls).items()]
+        self.keys += [(f"particles.{k}", spec) for k, spec in key_specs(SpeciesConfig).items()]
+        self.keys = [(k, spec) for k, spec in self.keys if k not in SKIP]
+        self.texts = {b: (SCENES / f"{b}.toml").read_text() for b in BASES}
+        self.n = 0
+        self.sigint_after = None     # seconds to Ctrl-C in the current case, or None
+
+    # ------------------------------------------------------------------ plumbing
+    def path(self, name: str) -> Path:
+        self.n += 1
+        folder = self.work / f"c{self.n}"
+        folder.mkdir()
+        return folder / name
+
+    def out(self) -> str:
+        return str(self.path("out"))
+
+    def scene_file(self, text: str | bytes, name: str = "scene.toml") -> str:
+        p = self.path(name)
+        (p.write_bytes if isinstance(text, bytes) else p.write_text)(text)
+        return str(p)
+
+    def base(self) -> str:
+        return self.rng.choice(BASES)
+
+    def short(self) -> list[str]:
+        return ["--quiet"] if self.rng.random() < 0.9 else []
+
+    # --------------------------------------------------------------- families
+    def value(self, key, spec) -> str:
+        r = self.rng
+        if spec.kind in ("float", "int"):
+            bounds = [b for b in (spec.gt, spec.ge, spec.lt, spec.le) if b is not None]
+            near = [repr(float(b + d)) if spec.kind == "float" else str(int(b + d))
+                    for b in bounds for d in (-1, 0, 1)]
+            if key in SIZE:
+                near += [str(SIZE[key]), "1", "2", "10000000000"]
+            pool = near + EXTREMES + ([f"{r.uniform(-5, 5):.3g}", str(r.randint(-3, 50))])
+            if spec.auto:
+                pool.append('"auto"')
+            return r.choice(pool) if r.random() < 0.85 else r.choice(WRONG)
+        if spec.kind == "bool":
+            return r.choice(["true", "false"] if r.random() < 0.7 else WRONG)
+        if spec.kind == "choice":
+            return r.choice([f'"{c}"' for c in spec.choices] if r.random() < 0.7 else WRONG)
+        if spec.kind == "interval":
+            return r.choice(["[-1.0, 0.0]", "[0.0, 1e300]", "[0.001, 0.0005]", "[0.0, 0.0028]",
+                             "[1e-9, 2e-9]", "[nan, 1.0]", "[0.0, 1.0, 2.0]"] + WRONG)
+        if spec.kind in ("points", "poses", "polygons"):
+            return self.polygon_text(spec.kind)
+        return r.choice(['"x"', '""', '"a/b"', '"runs/ü n"', '"."', '"\\n"', '"' + "n" * 300 + '"']
+                        + WRONG)
+
+    def polygon_text(self, kind: str) -> str:
+        poly = self.bad_polygon()
+        if kind == "polygons":
+            return f"[{poly}]"
+        if kind == "poses":
+            return self.rng.choice(["[[0.001, 0.0002]]", "[[0.001, 0.0002, 7.0]]", "[[nan, 0.0]]",
+                                    "[[0.0, 0.0, 0.0, 0.0]]", "[]", poly])
+        return poly
+
+    def bad_polygon(self) -> str:
+        """A polygon as TOML: simple, self-intersecting, zero-area, collinear,
+        repeated vertices, closed, huge, non-finite, of tiny or huge size."""
+        r = self.rng
+        s = 10.0 ** r.choice([-6, -5, -4, -3, 0, 300, -300])
+        n = r.choice([3, 4, 5, 12, 200, 1001, 2001, 3000])
+        shape = r.choice(["circle", "bowtie", "line", "repeat", "closed", "spike", "nan", "star"])
+        ang = [2 * math.pi * k / n for k in range(n)]
+        pts = [[s * math.cos(a), s * math.sin(a)] for a in ang]
+        if shape == "bowtie":
+            pts = [[0, 0], [s, s], [s, 0], [0, 0.7 * s]]
+        elif shape == "line":
+            pts = [[s * k, 0.0] for k in range(max(3, n // 100))]
+        elif shape == "repeat":
+            pts.insert(1, list(pts[0]))
+        elif shape == "closed":
+            pts.append(list(pts[0]))
+        elif shape == "spike":
+            pts = [[0, 0], [s, 0], [2 * s, 0], [s, 0], [s, s]]
+        elif shape == "nan":
+            pts[0][0] = float("nan")
+        elif shape == "star":
+            pts = [[s * (1 + (k % 2)) * math.cos(a), s * (1 + (k % 2)) * math.sin(a)]
+                   for k, a in enumerate(ang)]
+        return "[" + ", ".join(f"[{x!r}, {y!r}]" for x, y in pts) + "]"
+
+    def case_overrides(self):
+        r = self.rng
+        base = self.base()
+        args = [str(SCENES / f"{base}.toml"), "--out", self.out(), *self.short()]
+        for _ in range(r.randint(1, 4)):
+            key, spec = r.choice(self.keys)
+            args += ["--set", f"{key}={self.value(key, spec)}"]
+        if r.random() < 0.2:
+            args += ["--set", f"run.t_end={r.choice(['0', '-1', 'nan', '1e-300', '1e300', 'x'])}"]
+        if r.random() < 0.2:
+            args += r.choice([["--realizations", r.choice(["0", "-1", "2", "99999999", "x"])],
+                              ["--seed", r.choice(["-1", "0", str(2 ** 70), "1.5"])],
+                              ["--arch", r.choice(["cpu", "tpu", ""])], ["--no-video"]])
+        return args
+
+    def case_combination(self):
+        """Several extreme-but-valid values together (a valid scene, mostly)."""
+        r = self.rng
+        base = r.choice(["hourglass24", "vani_phi026", "squares"])
+        pool = ["particles.friction=0", "particles.friction=10", "particles.restitution=1",
+                "particles.restitution=1e-6", "damping.xi=0", "run.realizations=3",
+                "run.seed=4294967295", "particles.count=1", "particles.count=0",
+                "run.dt_safety=1", "output.frames=2", "output.series_interval=1e-9",
+                "clog.window=1e-9", "run.stop_at_clog=false", 'fluid.bc="flow_rate"',
+                "fluid.flow_rate=1e-30", "fluid.enabled=false", 'feed.mode="none"',
+                "contact.overlap_limit=0.99", "output.checkpoint_every=1e-9",
+                'name="ü n\\u00e9 name"', "particles.density=1e-3", "particles.density=1e6"]
+        sets = r.sample(pool, r.randint(2, 6))
+        return [str(SCENES / f"{base}.toml"), "--out", self.out(), "--quiet",
+                *sum((["--set", s] for s in sets), [])]
+
+    def case_toml(self):
+        r = self.rng
+        text = self.texts[self.base()]
+        kind = r.choice(["dup_key", "dup_table", "control", "deep", "huge_array", "cut",
+                         "flip", "bom", "crlf", "empty", "binary", "nul", "unicode_key",
+                         "huge_number", "long_string", "inline_particles", "top_array"])
+        if kind == "dup_key":
+            text = text.replace("[run]", "[run]\nseed = 1\nseed = 2", 1)
+        elif kind == "dup_table":
+            text += "\n[run]\nt_end = 1.0\n"
+        elif kind == "control":
+            c = chr(r.choice([0, 1, 7, 8, 11, 12, 27, 127]))
+            i = r.randrange(len(text))
+            text = text[:i] + c + text[i:]
+        elif kind == "deep":
+            d = r.choice([10, 100, 1000, 100000])
+            text += f"\n[output]\nx = {'[' * d}{']' * d}\n"
+        elif kind == "huge_array":
+            n = r.choice([1000, 100000, 500000])
+            item = r.choice(["1.0", "[1.0, 2.0]", '"s"'])
+            key = r.choice(["outline", "obstacles", "vertices", "x"])
+            text = text.replace("[geometry]", f"[geometry]\n{key} = [{', '.join([item] * n)}]", 1)
+        elif kind == "cut":
+            text = text[:r.randrange(len(text))]
+        elif kind == "flip":
+            data = bytearray(text.encode())
+            for _ in range(r.randint(1, 5)):
+                data[r.randrange(len(data))] = r.randrange(256)
+            return [self.scene_file(bytes(data)), "--out", self.out(), "--quiet"]
+        elif kind == "bom":
+            return [self.scene_file(b"\xef\xbb\xbf" + text.encode()), "--out", self.out(),
+                    "--quiet"]
+        elif kind == "crlf":
+            text = text.replace("\n", "\r\n")
+        elif kind == "empty":
+            text = r.choice(["", "\n", "# nothing\n", "[run]\n"])
+        elif kind == "binary":
+            return [self.scene_file(bytes(r.randrange(256) for _ in range(2000))),
+                    "--out", self.out(), "--quiet"]
+        elif kind == "nul":
+            text = text.replace("[run]", "[run]\x00", 1)
+        elif kind == "unicode_key":
+            text = text.replace("[run]", "[run]\n\"ünï\" = 1\n\"\" = 2", 1)
+        elif kind == "huge_number":
+            text = text.replace("[run]", "[run]\nseed = 99999999999999999999", 1)
+        elif kind == "long_string":
+            text = text.replace("[run]", f'description = "{"d" * 100000}"\n[run]', 1)
+        elif kind == "inline_particles":
+            text += '\nparticles = "none"\n'
+        elif kind == "top_array":
+            text = "[[run]]\nt_end = 1\n" + text
+        return [self.scene_file(text), "--out", self.out(), *self.short(),
+                "--set", "run.t_end=0.001"]
+
+    def case_polygon(self):
+        r = self.rng
+        poly = self.bad_polygon()
+        where = r.choice(["particle", "outline", "obstacle"])
+        if where == "particle":
+            text = self.texts["concave"]
+            start = text.index("vertices = [")
+            end = text.index("]]", start) + 2
+            text = text[:start] + f"vertices = {poly}" + text[end:]
+        else:
+            text = self.texts["vani_phi026"]
+            start = text.index("[geometry]")
+            end = text.index("\n[", start + 1)
+            box = "[[0.0, 0.0], [3e-3, 0.0], [3e-3, 4e-4], [0.0, 4e-4]]"
+            geometry = '[geometry]\nkind = "polygon"\n' + (
+                f"outline = {poly}\n" if where == "outline"
+                else f"outline = {box}\nobstacles = [{poly}]\n")
+            text = text[:start] + geometry + text[end:]
+        return [self.scene_file(text), "--out", self.out(), "--quiet"]
+
+    def case_paths(self):
+        r = self.rng
+        base = str(SCENES / f"{self.base()}.toml")
+        folder = self.path("d").parent
+        kind = r.choice(["space", "unicode", "newline", "long_scene", "long_out", "dangling",
+                         "loop", "out_file", "under_file", "dir_scene", "empty_out", "dev_null",
+                         "proc", "default_out", "scene_missing", "dash"])
+        text = Path(base).read_text()
+        if kind in ("space", "unicode", "newline"):
+            name = {"space": "a b c", "unicode": "ünï ☃ 名", "newline": "a\nb"}[kind]
+            scene = folder / f"{name}.toml"
+            scene.write_text(text)
+            return [str(scene), "--out", str(folder / name / name), "--quiet"]
+        if kind == "long_scene":
+            return [str(folder / ("s" * 300 + ".toml")), "--quiet"]
+        if kind == "long_out":
+            return [base, "--out", str(folder / ("o" * r.choice([255, 256, 5000]))), "--quiet"]
+        if kind == "dangling":
+            (folder / "link").symlink_to(folder / "nowhere")
+            return ([str(folder / "link"), "--quiet"] if r.random() < 0.5
+                    else [base, "--out", str(folder / "link"), "--quiet"])
+        if kind == "loop":
+            (folder / "l1").symlink_to(folder / "l2")
+            (folder / "l2").symlink_to(folder / "l1")
+            return ([str(folder / "l1"), "--quiet"] if r.random() < 0.5
+                    else [base, "--out", str(folder / "l1" / "x"), "--quiet"])
+        if kind == "out_file":
+            (folder / "f").write_text("mine")
+            return [base, "--out", str(folder / "f"), "--quiet"]
+        if kind == "under_file":
+            (folder / "f").write_text("mine")
+            return [base, "--out", str(folder / "f" / "sub"), "--quiet"]
+        if kind == "dir_scene":
+            return [str(folder), "--quiet"]
+        if kind == "empty_out":
+            return [base, "--out", "", "--quiet"]
+        if kind == "dev_null":
+            return [base, "--out", "/dev/null", "--quiet"]
+        if kind == "proc":
+            return [base, "--out", "/proc/1/x", "--quiet"]
+        if kind == "default_out":     # runs/<name> under the working folder (self.work)
+            return [base, "--quiet", "--set", f'name="{r.choice(["x y", "ü", "n" * 300])}"']
+        if kind == "scene_missing":
+            return [str(folder / "none.toml"), "--quiet"]
+        return ["--", base, "--quiet"]
+
+    def case_argv(self):
+        r = self.rng
+        base = str(SCENES / f"{self.base()}.toml")
+        return r.choice([
+            [], ["--help"], ["--bogus"], [base, "--set"], [base, "--set", "=1"],
+            [base, "--set", "run.t_end"], [base, "--set", "nosuch.key=1"],
+            [base, "--set", "particles.9.count=1"], [base, "--set", "particles.x.count=1"],
+            [base, base], [base, "--resume", str(self.work)], ["--resume"],
+            ["--resume", ""], [base, "--video", "--no-video"], [base, "--realizations"],
+            [base, "--out"], ["\x00"], ["-"], [base, "--set", "run..t_end=1"],
+            [base, "--set", "particles[0].count=1", "--set", "run.t_end=0"],
+            ["sweep", "--bogus"], ["run", base, "--set", "run.t_end=-1"],
+        ]) + ["--out", self.out()]
+
+    # ---------------------------------------------------------------- resume
+    def make_checkpoints(self):
+        """One real checkpoint (hourglass24, 0.2 s) and one of two realizations."""
+        self.ck = {}
+        for name, extra in (("one", []), ("two", ["--realizations", "2"])):
+            out = self.work / f"ck_{name}"
+            code = main([str(SCENES / "hourglass24.toml"), "--out", str(out), "--quiet",
+                         "--set", "run.t_end=0.2", *extra])
+            assert code == 0, f"could not make the checkpoint to corrupt (exit {code})"
+            self.ck[name] = out
+
+    def case_resume(self):
+        r = self.rng
+        src = self.ck[r.choice(["one", "one", "one", "two"])]
+        folder = self.path("run")
+        shutil.copytree(src, folder)
+        path = folder / checkpoint.FILE
+        kind = r.choice(["bytes", "header", "array", "foreign", "t_end", "file", "keys"])
+        sets = []
+        if kind == "bytes":
+            data = bytearray(path.read_bytes())
+            how = r.choice(["cut", "flip", "append", "zero"])
+            if how == "cut":
+                data = data[:r.randrange(len(data))]
+            elif how == "flip":
+                for _ in range(r.randint(1, 8)):
+                    data[r.randrange(len(data))] ^= 1 << r.randrange(8)
+            elif how == "append":
+                data += bytes(r.randrange(256) for _ in range(100))
+            else:
+                data = bytearray(len(data))
+            path.write_bytes(bytes(data))
+        elif kind in ("header", "array", "foreign"):
+            with np.load(path) as d:
+                arrays = {k: d[k] for k in d.files}
+            header = json.loads(bytes(arrays["header"]).decode())
+            if kind == "header":
+                table = header["host"] if r.random() < 0.7 else header
+                key = r.choice(sorted(table))
+                table[key] = r.choice([float("nan"), float("inf"), -1, 1e300, -7, "x", None, [],
+                                       {}, True, 2 ** 70, [1e300, -1], [[0, 1e300, -1]], 0])
+                arrays["header"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+            elif kind == "array":
+                name = r.choice(sorted(k for k in arrays if k != "header"))
+                a = arrays[name]
+                how = r.choice(["drop", "dtype", "shape", "nan", "huge", "str"])
+                if how == "drop":
+                    del arrays[name]
+                elif how == "dtype":
+                    arrays[name] = a.astype(r.choice([np.float32, np.int64, np.bool_, np.int8]))
+                elif how == "shape":
+                    arrays[name] = a.reshape(-1)[:max(0, a.size - 1)]
+                elif how == "nan" and a.size and a.dtype.kind == "f":
+                    a.reshape(-1)[r.randrange(a.size)] = r.choice([np.nan, np.inf, 1e300])
+                elif how == "huge" and a.size and a.dtype.kind == "i":
+                    a.reshape(-1)[r.randrange(a.size)] = r.choice([-2 ** 31, 2 ** 31 - 1, -1])
+                else:
+                    arrays[name] = np.array(["x"] * max(a.size, 1))
+            else:       # another run's header on these arrays
+                other = self.ck["two" if src == self.ck["one"] else "one"] / checkpoint.FILE
+                with np.load(other) as d:
+                    arrays["header"] = d["header"]
+            with open(path, "wb") as fh:
+                np.savez(fh, **arrays)
+        elif kind == "t_end":
+            t_end = r.choice(["0.1", "0", "nan", "-1", "1e300", "0.2", "0.21"])
+            sets = ["--set", f"run.t_end={t_end}"]
+        elif kind == "file":
+            path.unlink()
+            how = r.choice(["missing", "dir", "fifo", "dev_zero", "dangling"])
+            if how == "dir":
+                path.mkdir()
+            elif how == "fifo":
+                os.mkfifo(path)
+            elif how == "dev_zero":
+                path.symlink_to("/dev/zero")
+            elif how == "dangling":
+                path.symlink_to(folder / "nowhere")
+        else:
+            key, spec = r.choice(self.keys)
+            sets = ["--set", f"{key}={self.value(key, spec)}"]
+        return ["--resume", str(folder), "--quiet", *sets]
+
+    # ------------------------------------------------------------------ runs
+    def case_interrupt(self):
+        """A valid run that gets Ctrl-C (SIGINT) after a random delay: during set-up,
+        the run, or after it ended; ``self.sigint_after`` tells the loop when."""
+        self.sigint_after = self.rng.uniform(0.0, 3.0)
+        base = self.rng.choice(["hourglass24", "vani_phi026"])
+        return [str(SCENES / f"{base}.toml"), "--out", self.out(), "--quiet"]
+
+    def case(self):
+        self.sigint_after = None
+        family = self.rng.choices(
+            ["overrides", "combination", "toml", "polygon", "resume", "paths", "argv",
+             "interrupt"], weights=[35, 8, 15, 12, 15, 10, 5, 2])[0]
+        return family, getattr(self, f"case_{family}")()
+
+    def guarded_build(self, build):
+        """runner.build for a fuzz run: valid runs cut to ``STEPS`` steps, and past the
+        cap only resolved (every check of the set-up), not run."""
+        def guarded(scene, **options):
+            interrupt = self.sigint_after is not None
+            if self.runs >= self.valid_runs and not interrupt:
+                from taichi_hsdem.resolve import resolve
+                try:
+                    resolve(scene)
+                except Exception as exc:     # what main would say: let build say it
+                    if type(exc).__name__ != "SceneError":
+                        raise
+                    return build(scene, **options)
+                raise _Skip
+            sim = build(scene, **options)
+            self.runs += 1
+            if options.get("place_particles", True):      # an interrupt case: long enough
+                sim.extend(min(sim.scene.run.t_end, (100 if interrupt else 1) * STEPS * sim.dt))
+            return sim
+        return guarded
+
+
+@contextlib.contextmanager
+def _sigint_after(seconds: float | None):
+    """Send this process SIGINT after ``seconds`` (None: never); one that arrives
+    after ``main`` returned is ignored here, not raised in the fuzzer."""
+    if seconds is None:
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, lambda *a: None)
+    timer = threading.Timer(seconds, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+        timer.join()
+        signal.signal(signal.SIGINT, previous)
+
+
+def _complete(folder: Path) -> bytes | None:
+    summary = folder / "summary.json"
+    try:
+        return summary.read_bytes() if summary.is_file() else None
+    except OSError:
+        return None
+
+
+def _out_of(args: list[str], work: Path) -> Path | None:
+    if "--resume" in args:
+        i = args.index("--resume")
+        return Path(args[i + 1]) if i + 1 < len(args) and args[i + 1] else None
+    if "--out" in args:
+        i = args.index("--out")
+        return Path(args[i + 1]) if i + 1 < len(args) and args[i + 1] else None
+    return None
+
+
+def run_cases(n_cases: int, seed: int, valid_runs: int, work: Path, verbose=False) -> dict:
+    """Run ``n_cases`` seeded cases in ``work``; returns the counts and failures."""
+    debug = os.environ.get("TAICHI_HSDEM_DEBUG")
+    os.environ["TAICHI_HSDEM_DEBUG"] = "1"   # a defect shows its traceback here
+    fuzz = Fuzzer(work, seed, valid_runs)
+    cwd = os.getcwd()
+    os.chdir(work)                           # default output folders land here
+    build = runner.build
+    runner.build = fuzz.guarded_build(build)
+    codes, families, failures, slow = Counter(), Counter(), [], []
+    t0 = time.perf_counter()
+    try:
+        fuzz.make_checkpoints()
+        for k in range(n_cases):
+            family, args = fuzz.case()
+            families[family] += 1
+            out = _out_of(args, work)
+            before = _complete(out) if out is not None else None
+            err, std = io.StringIO(), io.StringIO()
+            t1 = time.perf_counter()
+            problem = None
+            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(std), \
+                    _sigint_after(fuzz.sigint_after):
+                try:
+                    code = main(list(args))
+                except _Skip:
+                    code = "valid, not run"
+                except BaseException:    # noqa: BLE001 - any escape is the finding
+                    code = "exception"
+                    problem = traceback.format_exc()
+            seconds = time.perf_counter() - t1
+            text = err.getvalue()
+            if problem is None:
+                if code not in EXITS and code != "valid, not run":
+                    problem = f"exit {code!r}"
+                elif code not in (0, "valid, not run") and not text.strip():
+                    problem = f"exit {code} without a message"
+                elif "Traceback" in text or "internal error" in text:
+                    problem = "traceback or internal error on stderr"
+            # A failed or refused run (1, 2) must leave the folder's summary as it was;
+            # an interrupted one (130) may have finished writing first, and says so.
+            if problem is None and code in (1, 2) and out is not None:
+                after = _complete(out)
+                if after is not None and after != before and b'"complete"' in after:
+                    problem = "a failed run left a complete-looking summary.json"
+            codes[code] += 1
+            if seconds > 60:
+                slow.append((k, family, args, seconds))
+            if problem:
+                failures.append({"case": k, "family": family, "args": args, "code": code,
+                                 "problem": problem, "stderr": text[-3000:]})
+            if verbose:
+                print(f"{k:5d} {family:12s} {str(code):15s} {seconds:6.2f}s "
+                      f"{'FAIL ' + problem.splitlines()[-1] if problem else ''}", flush=True)
+    finally:
+        runner.build = build
+        os.chdir(cwd)
+        if debug is None:
+            os.environ.pop("TAICHI_HSDEM_DEBUG")
+        else:
+            os.environ["TAICHI_HSDEM_DEBUG"] = debug
+    return {"cases": n_cases, "codes": codes, "families": families, "failures": failures,
+            "slow": slow, "runs": fuzz.runs, "seconds": time.perf_counter() - t0}
+
+
+def report(res: dict) -> str:
+    lines = [f"cases: {res['cases']}   wall time: {res['seconds']:.0f} s   "
+             f"real runs: {res['runs']}   failures: {len(res['failures'])}",
+             "exit    count"]
+    lines += [f"{str(code):15s} {n}" for code, n in sorted(res["codes"].items(), key=str)]
+    lines += ["family  count"] + [f"{f:15s} {n}" for f, n in sorted(res["families"].items())]
+    for k, fam, args, s in res["slow"]:
+        lines.append(f"slow: case {k} ({fam}) {s:.0f} s: {args!r}"[:400])
+    for f in res["failures"]:
+        lines += [f"FAIL case {f['case']} ({f['family']}): {f['problem'].splitlines()[-1]}",
+                  f"  argv: {f['args']!r}"[:2000], "  " + (f["problem"] if "Traceback" in
+                                                          f["problem"] else f["stderr"])[-1500:]]
+    return "\n".join(lines)
+
+
+def _main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--cases", type=int, default=2000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--valid-runs", type=int, default=50,
+                   help="most valid scenes run for real (each cut to a few dozen steps)")
+    p.add_argument("--work", help="folder for the cases' files (default: a temporary one)")
+    p.add_argument("--verbose", action="store_true", help="one line per case")
+    a = p.parse_args(argv)
+    with contextlib.ExitStack() as stack:
+        work = Path(a.work) if a.work else Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        work.mkdir(parents=True, exist_ok=True)
+        res = run_cases(a.cases, a.seed, a.valid_runs, work.resolve(), a.verbose)
+    print(report(res))
+    return 1 if res["failures"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main())
