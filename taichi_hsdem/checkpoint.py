@@ -42,6 +42,11 @@ FORMAT = 1
 # the command line reads checkpoints before it loads Taichi).
 RESULT_KEYS = ("seed", "escapees", "clogged", "t_clog", "status", "reason", "t_stop")
 RESULT_STATUSES = ("ok", "unstable")
+# The host's per-realization bookkeeping arrays: checkpoint name -> Simulation attribute.
+HOST_ARRAYS = {"host.last_escape_t": "last_escape_t", "host.escaped": "escaped_np",
+               "host.arch_static_t": "arch_static_t",
+               "host.escaped_by_species": "escaped_by_species",
+               "host.unfed_by_species": "unfed_by_species"}
 
 
 class CheckpointError(ValueError):
@@ -81,6 +86,7 @@ def save(sim, path) -> Path:
         "rngs": [rng.bit_generator.state for rng in sim.rngs],
         "results": [vars(r) for r in sim.results],
         "series": [[int(r), float(t), int(s)] for r, t, s in sim.series],
+        "flow": [[int(r), float(t), float(dp), float(q)] for r, t, dp, q in sim.flow],
         "next_series": sim.next_series, "any_running": sim.any_running,
         "history_overflows": sim.history_overflows, "launches": sim.launches,
         "neighbor_caps": [sim.neighbors.cell_cap, sim.neighbors.nbr_cap],
@@ -88,8 +94,7 @@ def save(sim, path) -> Path:
         "e0": None if sim.e0 is None else [float(v) for v in sim.e0],
         "u_ref": None if sim.u_ref is None else [float(v) for v in sim.u_ref],
     }
-    arrays["host.last_escape_t"] = sim.last_escape_t
-    arrays["host.escaped"] = sim.escaped_np
+    arrays.update({name: getattr(sim, attr) for name, attr in HOST_ARRAYS.items()})
     if sim.fluid is not None:
         fl = sim.fluid
         arrays["fluid.pressure"] = fl.pressure
@@ -232,6 +237,13 @@ def _check_host(host, path) -> None:
             and _is_real(row[1]) and 0 <= row[1] <= t and _is_int(row[2]) and row[2] >= 0
             for row in series):
         bad("series", "must be rows [realization, t, escapees] with t in [0, host.t]")
+    flow = host.get("flow")
+    if not isinstance(flow, list) or not all(
+            isinstance(row, list) and len(row) == 4 and _is_int(row[0]) and 0 <= row[0] < R
+            and _is_real(row[1]) and 0 <= row[1] <= t
+            and all(isinstance(v, float) for v in row[2:]) for row in flow):
+        bad("flow", "must be rows [realization, t, pressure drop, flow rate] with t in "
+                    "[0, host.t]")
     caps = host.get("neighbor_caps")
     if not isinstance(caps, list) or len(caps) != 2 or not all(
             _is_int(c) and c >= 1 for c in caps):
@@ -295,8 +307,8 @@ def restore(sim, path) -> dict:
         value = arrays[name]
         floating = np.issubdtype(value.dtype, np.floating)
         array.from_numpy(value.astype(npr if floating else value.dtype))
-    sim.last_escape_t = arrays["host.last_escape_t"]
-    sim.escaped_np = arrays["host.escaped"]
+    for name, attr in HOST_ARRAYS.items():
+        setattr(sim, attr, arrays[name])
     if sim.fluid is not None:
         fl = sim.fluid
         fl.pressure = arrays["fluid.pressure"]
@@ -315,6 +327,7 @@ def restore(sim, path) -> dict:
     for res, saved in zip(sim.results, host["results"]):
         vars(res).update(saved)
     sim.series = [(int(r), float(t), int(s)) for r, t, s in host["series"]]
+    sim.flow = [(int(r), float(t), float(dp), float(q)) for r, t, dp, q in host["flow"]]
     sim.next_series = float(host["next_series"])
     sim.any_running = bool(host["any_running"])
     sim.history_overflows = int(host["history_overflows"])
@@ -365,8 +378,7 @@ def _read_arrays(sim, path, host) -> dict:
     expected = {name: a.to_numpy() for name, a in _device_arrays(sim).items()}
     for name, cap in (("neighbors.cell_p", cell_cap), ("neighbors.nbr", nbr_cap)):
         expected[name] = np.zeros(expected[name].shape[:-1] + (cap,), expected[name].dtype)
-    expected["host.last_escape_t"] = sim.last_escape_t
-    expected["host.escaped"] = sim.escaped_np
+    expected.update({name: getattr(sim, attr) for name, attr in HOST_ARRAYS.items()})
     if sim.fluid is not None:
         fl = sim.fluid
         expected["fluid.pressure"] = np.zeros((R, *sim.model.fluid_shape))
@@ -408,9 +420,12 @@ def _read_arrays(sim, path, host) -> dict:
               "host.escaped": (0, None), "neighbors.cell_p": (0, N - 1),
               "neighbors.nbr": (0, N - 1), "neighbors.cell_n": (0, N),
               "neighbors.nbr_n": (0, N), "history.0.partners": (0, N + 1),
-              "history.1.partners": (0, N + 1), "host.last_escape_t": (0, t)}
+              "history.1.partners": (0, N + 1), "host.last_escape_t": (0, t),
+              "host.escaped_by_species": (0, None), "host.unfed_by_species": (0, N),
+              "host.arch_static_t": (0, t)}     # (NaN: no static arch yet)
     for name, (low, high) in bounds.items():
         value = arrays[name]
+        value = value[~np.isnan(value)] if name == "host.arch_static_t" else value
         if value.size and (value.min() < low or (high is not None and value.max() > high)):
             raise CheckpointError(f"{path}: {name}: values outside [{low}, "
                                   f"{'inf' if high is None else high}]")
