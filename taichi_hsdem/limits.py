@@ -52,6 +52,16 @@ MAX_VIDEO_WIDTH = 7680
 THREADS_ENV = "TAICHI_HSDEM_THREADS"
 
 
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity, within :func:`thread_share`)."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = os.cpu_count() or 1
+    share = thread_share()
+    return min(cpus, share) if share else cpus
+
+
 def thread_share() -> int | None:
     """The threads this process may use (``THREADS_ENV``), or None for all."""
     value = os.environ.get(THREADS_ENV, "")

@@ -33,7 +33,6 @@ import traceback
 
 import numpy as np
 
-from ..limits import thread_share
 
 # Hierarchy options. Seven Ruge-Stuben levels down to a handful of unknowns cost
 # more in per-level overhead than they save on a grid of 1e4 unknowns; stopping at
@@ -142,16 +141,6 @@ _CALLS = {"solve_block": solve_block, "forget": forget}
 
 # The folder holding the taichi_hsdem package, where ``python -m`` finds it.
 _PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-
-def usable_cpus() -> int:
-    """CPUs this process may run on (its affinity, within ``limits.thread_share``)."""
-    try:
-        cpus = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cpus = os.cpu_count() or 1
-    share = thread_share()
-    return min(cpus, share) if share else cpus
 
 
 class _Worker:

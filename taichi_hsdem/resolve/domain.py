@@ -9,7 +9,7 @@ import numpy as np
 from .. import limits
 from ..layout import DISK_HISTORY_SLOTS, LS_HISTORY_SLOTS
 from ..fluid import PressureSolver
-from ..fluid.pool import usable_cpus
+from ..limits import usable_cpus
 from ..geometry import walls as wl
 from ..geometry.placement import check_initial
 from ..limits import Part

@@ -18,7 +18,7 @@ from __future__ import annotations
 import tempfile
 from typing import Callable, Sequence
 
-from ..fluid.pool import usable_cpus
+from ..limits import usable_cpus
 from ..limits import THREADS_ENV
 
 INSTALL_HINT = 'pip install "taichi_hsdem[cluster]"'
