@@ -1,4 +1,4 @@
-"""Fluid-particle coupling against exact or independent answers (MODEL.md sections 2, 3, 6).
+"""Fluid-particle coupling against exact or independent answers (docs/model.md sections 2, 3, 6).
 
 Every scene here is a straight channel (``geometry.kind = "polygon"``, a long
 rectangle), dimensionless, unit viscosity, gap ``H = 1.2`` and particles of
@@ -111,7 +111,7 @@ def lone_particle(species, cell, x, theta=0.0, width=WIDTH, sampling="bilinear")
 def disk_force_exact(sim, width=WIDTH):
     """(1 + beta) A G H with the two known corrections, for the disk of ``sim``.
 
-    MODEL.md section 6: on ``r = a`` the exact pressure is
+    docs/model.md section 6: on ``r = a`` the exact pressure is
     ``p = -(1 + beta) G a cos(t)`` (inside and outside agree there). The force on
     the prism of depth H is ``-H \\oint p n dl = (1 + beta) G H a^2 \\int cos^2 t dt``
     ``= (1 + beta) pi a^2 G H`` along +x, down the gradient. The coupling sums
@@ -515,7 +515,7 @@ def test_escapee_rate_matches_the_paper_formula(stream_phi01):
 
 
 def test_fixed_obstacle_model_outruns_the_formula():
-    # fluid.particle_flux = false (MODEL.md's div u = 0 round particles held
+    # fluid.particle_flux = false (docs/model.md's div u = 0 round particles held
     # fixed): the imposed Q squeezes round every particle, so at phi = 0.1 the
     # particles outrun Q/(HW) and the rate exceeds 4 phi Q / (H pi d^2) by 19-38 %
     # (frozen suspensions: mean drift / (Q/HW) = 1.04 at phi 0.02, 1.22 at 0.1,

@@ -1,7 +1,9 @@
 """The benchmark and study commands' argument handling (their runs are measured,
-not tested: see README, Benchmarks)."""
+not tested: see docs/performance.md)."""
 import importlib.util
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -161,3 +163,19 @@ def test_escape_windows_pool_escapes_over_unclogged_time(tmp_path):
     assert tool.main([str(tmp_path), "--windows", "2:1"]) == 2
     (tmp_path / "realizations.csv").unlink()
     assert tool.main([str(tmp_path)]) == 2               # a folder without its table
+
+
+def test_neck_study_sets_the_width_from_the_diameter_and_tabulates(tmp_path):
+    """tools/neck_study.py: each point's resolved neck is W/d times the largest
+    equivalent diameter (vani: d = 140 um), and the table has a row per point."""
+    from taichi_hsdem.scene import read_toml
+    neck = _load("neck_study")
+    out = tmp_path / "neck"
+    assert neck.main(["--wd", "1.3", "--realizations", "1", "--t-end", "0.01",
+                      "--out", str(out), "--quiet"]) == 0
+    (point,) = [p for p in out.iterdir() if p.is_dir()]
+    resolved = read_toml(point / "scene.resolved.toml")
+    assert resolved["geometry"]["constriction_width"] == pytest.approx(1.3 * 140e-6, rel=1e-9)
+    md = (out / "neck.md").read_text().splitlines()
+    assert md[0].startswith("| W/d |") and md[2].startswith("| 1.3 |")
+    assert (out / "neck.csv").read_text().splitlines()[1].startswith("1.3,")

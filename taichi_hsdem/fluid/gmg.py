@@ -1,7 +1,7 @@
 """Batched geometric-multigrid CG for the Hele-Shaw pressure, in Taichi (issue #22).
 
 :class:`TaichiPressureSolver` solves the finite-volume system of
-:class:`taichi_hsdem.fluid.PressureSolver` (MODEL.md section 2: cell-centred
+:class:`taichi_hsdem.fluid.PressureSolver` (docs/model.md section 2: cell-centred
 two-point fluxes with the harmonic mean, Dirichlet faces half a cell away, walls
 passing no flux) for all ``R`` realizations at once, without assembling a matrix,
 in float64 whatever the simulation's precision, on the Taichi backend in use: on
@@ -155,7 +155,7 @@ class TaichiPressureSolver:
     Notes
     -----
     *Zero permeability.* A realization with ``kappa == 0`` in connected cells has
-    its cut-off cells (MODEL.md: no pressure, NaN) found on the host: its kappa
+    its cut-off cells (docs/model.md: no pressure, NaN) found on the host: its kappa
     is copied there and labelled with :func:`scipy.ndimage.label`, once per
     solve in which it has zeros; everything else stays on the device.
 

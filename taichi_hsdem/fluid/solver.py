@@ -1,4 +1,4 @@
-"""The Hele-Shaw pressure solve (MODEL.md section 2): the finite-volume system of
+"""The Hele-Shaw pressure solve (docs/model.md section 2): the finite-volume system of
 :mod:`.system` solved by conjugate gradients preconditioned with classical
 (Ruge-Stuben) algebraic multigrid, one hierarchy per realization, in this process
 or in worker processes (:mod:`.pool`).

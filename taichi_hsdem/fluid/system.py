@@ -1,5 +1,5 @@
 """The finite-volume discretisation of the Hele-Shaw pressure equation on the
-fixed grid (MODEL.md section 2), independent of how it is solved.
+fixed grid (docs/model.md section 2), independent of how it is solved.
 
 The fluid obeys ``div u = 0`` and ``u = -(kappa / eta) grad p``, per unit depth of
 the gap. Cell-centred finite volumes on a uniform grid of ``nx x ny`` cells; every
