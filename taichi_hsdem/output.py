@@ -382,6 +382,13 @@ class Pictures:
         return [n for n in names if (self.staged.tmp / n).exists()]
 
 
+def vtk_realizations(scene) -> list[int]:
+    """The realizations the ParaView series holds (``output.vtk_realizations``)."""
+    from .scene.keys import vtk_indices
+    o = scene.output
+    return vtk_indices(o.vtk_realizations, scene.run.realizations, o.video_realization)
+
+
 def _series_writer(sim, staged: Staging, resume_dir: Path | None):
     from .geometry.shapes import outline_polygon
     from .paraview import FluidGrid, SeriesWriter
@@ -390,27 +397,28 @@ def _series_writer(sim, staged: Staging, resume_dir: Path | None):
     grid = None
     if sim.fluid is not None:
         grid = FluidGrid(origin=(g.x_min, g.y_min), spacing=m.fluid_dx, active=m.fluid_active)
-    r = sim.scene.output.video_realization
     old = None if resume_dir is None else Path(resume_dir)
     if old is not None and (old / "vtk").is_dir() and (old / "series.pvd").is_file():
         # go on with the earlier part's series
         shutil.copytree(old / "vtk", staged.path("vtk"))
         shutil.copy2(old / "series.pvd", staged.path("series.pvd"))
-    return SeriesWriter(staged.tmp, [r], g.outline, list(g.obstacles),
+    return SeriesWriter(staged.tmp, vtk_realizations(sim.scene), g.outline, list(g.obstacles),
                         [outline_polygon(s.shape) for s in m.species], grid,
                         resume=sim.t if resume_dir is not None else None)
 
 
 def _vtk_frame(writer, sim):
-    r = sim.scene.output.video_realization
-    last = writer.last_time(r)
-    if last is not None and sim.t <= last:
-        return                     # a resumed run's first frame: the series has it
-    st = sim.state()
-    pressure = kappa = None
-    if sim.fluid is not None:
-        pressure = sim.pressure()[r]
-        kappa = sim.fluid.kappa.to_numpy()[r].astype(float)
-    writer.write_frame(sim.t, st["x"][r], st["theta"][r], st["v"][r], st["omega"][r],
-                       st["alive"][r], st["species"], pressure=pressure, permeability=kappa,
-                       realization=r)
+    st = pressure = kappa = None
+    for r in vtk_realizations(sim.scene):
+        last = writer.last_time(r)
+        if last is not None and sim.t <= last:
+            continue               # a resumed run's first frame: the series has it
+        if st is None:
+            st = sim.state()
+            if sim.fluid is not None:
+                pressure = sim.pressure()
+                kappa = sim.fluid.kappa.to_numpy().astype(float)
+        writer.write_frame(sim.t, st["x"][r], st["theta"][r], st["v"][r], st["omega"][r],
+                           st["alive"][r], st["species"],
+                           pressure=None if pressure is None else pressure[r],
+                           permeability=None if kappa is None else kappa[r], realization=r)

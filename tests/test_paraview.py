@@ -1,6 +1,7 @@
 """ParaView series: files read back with VTK's own readers match the state written."""
 import sys
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -271,3 +272,22 @@ def test_missing_vtk_names_the_extra(tmp_path, monkeypatch):
         assert not list(tmp_path.iterdir())                      # nothing written
     finally:
         paraview._vtk.cache_clear()
+
+
+def test_the_series_holds_the_realizations_chosen(tmp_path, capsys):
+    """``output.vtk_realizations``: by default the video's realization only, or the
+    indices given; an index out of range is refused in one line (exit 2)."""
+    from taichi_hsdem.cli import main
+    scene = str(Path(__file__).resolve().parents[1] / "scenes" / "hourglass24.toml")
+    base = [scene, "--realizations", "3", "--vtk", "--set", "run.t_end=0.2",
+            "--set", "output.frames=3", "--quiet"]
+    assert main(base + ["--out", str(tmp_path / "a")]) == 0
+    assert sorted(p.name for p in (tmp_path / "a" / "vtk").glob("r*")) == ["r000"]
+    assert main(base + ["--out", str(tmp_path / "b"),
+                        "--set", 'output.vtk_realizations="2, 0"']) == 0
+    assert sorted(p.name for p in (tmp_path / "b" / "vtk").glob("r*")) == ["r000", "r002"]
+    capsys.readouterr()
+    assert main(base + ["--out", str(tmp_path / "c"),
+                        "--set", 'output.vtk_realizations="0,3"']) == 2
+    err = capsys.readouterr().err
+    assert "output.vtk_realizations" in err and "[0, 2]" in err and err.count("\n") == 1

@@ -369,10 +369,37 @@ class OutputConfig(Config):
                                      "(default t_end / 200)", gt=0)
     vtk: bool = keyfield("bool", "write a ParaView series (series.pvd: particle outlines, "
                          "pressure and permeability) at the video's frame times", False)
+    vtk_realizations: str = keyfield("str", 'the realizations the ParaView series holds: '
+                                     '"video" (output.video_realization), "all", or '
+                                     'indices such as "0,2,5" (each < run.realizations)',
+                                     "video")
     checkpoint_every: float = keyfield("float", "wall-clock seconds between checkpoints "
                                        "(checkpoint.npz, also written at the end and when "
                                        "interrupted; --resume continues one); 0: only then, s",
                                        600.0, ge=0)
+
+
+def vtk_indices(text: str, realizations: int, video: int) -> list[int]:
+    """The realizations ``output.vtk_realizations`` names, sorted; ValueError (its
+    message in the user's terms) when it names none or one out of range.
+
+    >>> vtk_indices("2, 0", 4, 1), vtk_indices("video", 4, 1), vtk_indices("all", 3, 0)
+    ([0, 2], [1], [0, 1, 2])
+    """
+    text = text.strip()
+    if text == "video":
+        return [video]
+    if text == "all":
+        return list(range(realizations))
+    try:
+        chosen = sorted({int(part) for part in text.split(",")})
+    except ValueError:
+        raise ValueError(f'expected "video", "all" or indices such as "0,2,5", got '
+                         f"{text[:40]!r}") from None
+    if chosen[0] < 0 or chosen[-1] >= realizations:
+        raise ValueError(f"indices must lie in [0, {realizations - 1}] (run.realizations = "
+                         f"{realizations}), got {text[:40]!r}")
+    return chosen
 
 
 SECTIONS = {"run": RunConfig, "fluid": FluidConfig, "geometry": GeometryConfig,

@@ -72,6 +72,7 @@ from .keys import (
     keyfield,
     shape_area,
     shape_vertex_count,
+    vtk_indices,
 )
 from ..limits import MAX_OUTLINE_VERTICES
 from .toml import parse_override_value, read_toml
@@ -341,6 +342,12 @@ def _check_scene(scene: dict, species: dict[int, dict], shapes: dict[int, Any],
         out.add("output.video_realization",
                 f"must be < run.realizations ({run['realizations']}), got "
                 f"{output['video_realization']}")
+    if good(output["vtk_realizations"], run["realizations"], output["video_realization"]):
+        try:
+            vtk_indices(output["vtk_realizations"], run["realizations"],
+                        output["video_realization"])
+        except ValueError as exc:
+            out.add("output.vtk_realizations", str(exc))
     contact = scene["contact"]
     if (good(contact["overlap_target"], contact["overlap_limit"])
             and contact["overlap_limit"] <= contact["overlap_target"]):
