@@ -356,6 +356,14 @@ def _run(args, scene, resume_from, staged, interrupt) -> int:
         for line in exc.lines:
             print(f"run failed: {line}", file=sys.stderr)
         return EXIT_FAILED
+    except OSError as exc:      # a checkpoint or a ParaView frame could not be written
+        interrupt.phase = interrupt.WRITE
+        progress.close()
+        pictures.discard()
+        print(f"run failed: could not write to {out} ({exc.strerror or exc}); this run's "
+              "results were not written, the folder's earlier ones are as they were",
+              file=sys.stderr)
+        return EXIT_FAILED
     except KeyboardInterrupt:   # a second Ctrl-C: stop now, keep nothing new
         interrupt.phase = interrupt.WRITE
         progress.close()

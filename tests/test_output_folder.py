@@ -258,3 +258,30 @@ def test_flow_csv_reads_the_drop_a_pump_would_at_the_flow_the_pressure_inlet_gav
     assert p0[1] == q0[1] == 0.0 and p0[2] == 100.0
     assert q0[2] == pytest.approx(100.0, rel=1e-4)
     assert q0[3] == pytest.approx(p0[3], rel=1e-6)
+
+
+@pytest.mark.parametrize("where", ["checkpoint", "plots"])
+def test_a_full_disk_is_one_line_and_leaves_the_earlier_result(tmp_path, capsys,
+                                                               monkeypatch, where):
+    """No space left while the run writes its checkpoint (during the run) or its
+    plots (at the end): exit 1, one line, the earlier result byte for byte."""
+    import errno
+    from taichi_hsdem import checkpoint, report
+    out = tmp_path / "o"
+    assert main([HOURGLASS, "--out", str(out), *SHORT]) == 0
+    before = snapshot(out)
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    if where == "checkpoint":
+        monkeypatch.setattr(checkpoint, "save", full)
+        sets = ["--set", "output.checkpoint_every=1e-9"]     # at every chunk
+    else:
+        monkeypatch.setattr(report, "plot_run", full)
+        sets = []
+    capsys.readouterr()
+    assert main([HOURGLASS, "--out", str(out), *SHORT, *sets]) == 1
+    err = capsys.readouterr().err
+    assert "No space left on device" in err and err.count("\n") == 1, err
+    assert snapshot(out) == before
