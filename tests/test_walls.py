@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from taichi_hsdem.geometry import walls as wl
+from taichi_hsdem.geometry import wallfield as wf
 from taichi_hsdem.geometry.polygon import signed_area
 
 # Outlines are built from a handful of sums, products and one tan(); 1e-12 on
@@ -186,7 +187,7 @@ def test_wall_distance_with_an_obstacle():
 def test_wall_field_covers_the_box_and_matches_the_nodes():
     g = converging_ref()
     h = 0.05
-    f = wl.make_wall_field(g, h)
+    f = wf.make_wall_field(g, h)
     assert np.allclose(f.origin, [g.x_min - 4 * h, g.y_min - 4 * h], atol=EXACT)
     far = f.origin + (np.array(f.phi.shape) - 1) * h
     assert np.all(far >= [g.x_max + 4 * h - EXACT, g.y_max + 4 * h - EXACT])
@@ -201,15 +202,15 @@ def test_sample_wall_exact_where_the_distance_is_linear():
     # linear function of position, which bilinear interpolation reproduces up to
     # round-off; its gradient is the wall's inward normal.
     g = converging_ref()
-    f = wl.make_wall_field(g, 0.05)
+    f = wf.make_wall_field(g, 0.05)
     rng = np.random.default_rng(3)
     pts = np.column_stack([rng.uniform(1.0, 5.0, 200), rng.uniform(0.5, 1.9, 200)])
     pts[::2, 1] *= -1
-    phi, grad = wl.sample_wall(f, pts)
+    phi, grad = wf.sample_wall(f, pts)
     assert np.allclose(phi, wl.wall_distance(g, pts), atol=1e-12)
     assert np.allclose(grad, np.column_stack([np.zeros(200), -np.sign(pts[:, 1])]), atol=1e-9)
     # Near the inlet the field feels only the side walls: no push along x.
-    phi0, grad0 = wl.sample_wall(f, [[0.01, 1.0], [-0.1, -1.0]])
+    phi0, grad0 = wf.sample_wall(f, [[0.01, 1.0], [-0.1, -1.0]])
     assert np.allclose(phi0, [1.0, 1.0], atol=1e-12)
     assert np.allclose(grad0[:, 0], 0.0, atol=1e-9)
 
@@ -230,7 +231,7 @@ def test_sample_wall_second_order_near_a_corner():
     assert np.allclose(exact, r, atol=EXACT)
     errors = []
     for h in (0.02, 0.01):
-        phi, grad = wl.sample_wall(wl.make_wall_field(g, h), pts)
+        phi, grad = wf.sample_wall(wf.make_wall_field(g, h), pts)
         r_min = r - math.sqrt(2) * h
         assert np.all(np.abs(phi - exact) <= h ** 2 / (8 * r_min) + EXACT)
         unit = (pts - c) / r[:, None]

@@ -23,6 +23,7 @@ from .. import limits
 from ..geometry import distance as dist
 from ..geometry import walls as wl
 from ..geometry.placement import count_for_fraction
+from ..geometry.wallfield import make_wall_field
 from ..laws import free_permeability, kozeny_carman
 from ..limits import Part
 from ..scene import Scene, SceneError
@@ -253,7 +254,7 @@ def _resolve(scene: Scene, arch: str) -> Model:
         _check_feed(res, geom, "feed.inlet", inlet, d_max)
         res.stop_if_bad()
     model.feed_inlet = tuple(inlet)
-    model.wall_field = wl.make_wall_field(geom, wall_h)
+    model.wall_field = make_wall_field(geom, wall_h)
     if f.enabled:
         _fluid_grid(res, model, nx, ny)
     model.skin = SKIN_FRACTION * d_min

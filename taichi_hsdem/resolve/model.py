@@ -10,6 +10,7 @@ import numpy as np
 
 from ..geometry import shapes as shp
 from ..geometry import walls as wl
+from ..geometry.wallfield import WallField
 from ..scene import Scene, SceneError
 
 # Resolution limits: below these a particle (or the constriction) is not seen by
@@ -77,7 +78,7 @@ class Model:
     """The resolved set-up of one scene (no Taichi objects)."""
     scene: Scene
     geometry: wl.Geometry
-    wall_field: wl.WallField
+    wall_field: WallField
     species: list[Species]
     species_of_particle: np.ndarray
     all_disks: bool
