@@ -20,9 +20,6 @@ ROOT = Path(taichi_hsdem.__file__).parent
 KERNEL_MODULES = sorted(
     ".".join(("taichi_hsdem",) + p.relative_to(ROOT).with_suffix("").parts)
     for p in ROOT.rglob("*.py") if "@ti.kernel" in p.read_text() or "@ti.func" in p.read_text())
-# Still taking their arrays one by one (issue 33, in progress elsewhere): strict,
-# so that the mark goes when they are converted.
-NOT_YET = {"taichi_hsdem.dem.coupling", "taichi_hsdem.fluid._gmg_cg"}
 
 
 def taichi_callables(module):
@@ -50,9 +47,7 @@ def elements(annotation) -> int:
     return 1
 
 
-@pytest.mark.parametrize("module", [
-    pytest.param(m, marks=pytest.mark.xfail(strict=True, reason="not converted yet"))
-    if m in NOT_YET else m for m in KERNEL_MODULES])
+@pytest.mark.parametrize("module", KERNEL_MODULES)
 def test_kernels_take_at_most_16_parameters(module):
     found = taichi_callables(importlib.import_module(module))
     assert found, f"{module} holds no Taichi kernel or function"
@@ -92,3 +87,17 @@ def test_a_pack_follows_its_bundles_arrays():
     pack = bodies.pack()
     bodies.alive = state.array([[1, 0]], ti.i32)   # a replaced array: a new pack
     assert bodies.pack()["alive"] is bodies.alive and pack["alive"] is not bodies.alive
+
+
+def test_a_part_packs_some_of_a_bundles_arrays():
+    from taichi_hsdem.dem import state
+    backend.init("cpu", precision())
+    pose = state.Bodies.part("x", "alive")
+    assert list(pose.members) == ["x", "alive"]
+    bodies = state.Bodies.zeros(1, 2)
+    part = bodies.pack_of(pose)
+    assert part["x"] is bodies.x and bodies.pack_of(pose) is part   # kept
+    bodies.alive = state.array([[1, 0]], ti.i32)
+    assert bodies.pack_of(pose)["alive"] is bodies.alive            # follows a replaced array
+    with pytest.raises(TypeError, match=r"Materials\.x: Bodies already has an array"):
+        state.Materials.part("x")

@@ -39,59 +39,68 @@ from ..layout import SAMPLING
 
 vec2 = ti.math.vec2
 
+# The kernels below run at every fluid update (pressure_forces twice with the
+# implicit carried volume) and a launch costs about 3.5 us per array: they take
+# the parts of the bundles they read (state.Bundle.part), not whole bundles.
+_POSE = state.Bodies.part("x", "theta", "alive")
+_HELD = state.Bodies.part("x", "theta", "alive", "f_fluid", "tau_fluid")
+_LEVEL_SETS = state.Templates.part("is_circle", "radius", "ls_phi", "ls_grad", "ls_meta",
+                                   "ls_geo")
+_NODES = state.Templates.part("node_pos", "node_area", "node_meta")
+# FluidCoupling's arrays: the permeability (``cell_kappa``: Materials has a
+# ``kappa``), carried flux and owners rasterize_permeability writes, from the
+# free permeability ``base`` and the source velocities ``vs``, ``ws``; and the
+# bodies' state at the last solve with their terms of the next (body_drift).
+_CELLS = state.pack_type("FluidCoupling", ("base", "cell_kappa", "carried", "owner", "vs",
+                                           "ws"))
+_DRIFT = state.pack_type("FluidCoupling", ("past", "centre", "mobility", "drift"))
+
 
 @ti.func
-def inside_body(tm, is_circle: ti.template(), trad: ti.template(), ls_phi: ti.template(),
-                ls_grad: ti.template(), ls_meta: ti.template(), ls_geo: ti.template(), q):
+def inside_body(templates: ti.template(), tm, q):
     """Is body-frame point ``q`` inside template ``tm``."""
     inside = False
-    if is_circle[tm] != 0:
-        inside = q.norm() <= trad[tm]
+    if templates.is_circle[tm] != 0:
+        inside = q.norm() <= templates.radius[tm]
     else:
-        phi, g = template_sample(ls_phi, ls_grad, ls_meta, ls_geo, tm, q)
+        phi, g = template_sample(templates.ls_phi, templates.ls_grad, templates.ls_meta,
+                                 templates.ls_geo, tm, q)
         inside = phi <= 0.0
     return inside
 
 
 @ti.kernel
-def rasterize_permeability(x: ti.types.ndarray(), th: ti.types.ndarray(),
-                           alive: ti.types.ndarray(), sp: ti.types.ndarray(),
-                           rb: ti.types.ndarray(), kp: ti.types.ndarray(),
-                           is_circle: ti.types.ndarray(), trad: ti.types.ndarray(),
-                           ls_phi: ti.types.ndarray(), ls_grad: ti.types.ndarray(),
-                           ls_meta: ti.types.ndarray(), ls_geo: ti.types.ndarray(),
-                           base: ti.types.ndarray(), kappa: ti.types.ndarray(),
-                           vs: ti.types.ndarray(), ws: ti.types.ndarray(),
-                           carried: ti.types.ndarray(), owner: ti.types.ndarray(),
+def rasterize_permeability(bodies: _POSE, sp: ti.types.ndarray(), rb: ti.types.ndarray(),
+                           kp: ti.types.ndarray(), templates: _LEVEL_SETS, cells: _CELLS,
                            ox: float, oy: float, h: float):
     """Permeability of every fluid cell, ``chi v``: the velocity of the particle
     a cell's centre lies in (``vs + ws x r``), zero outside particles, and
     ``owner``: that particle (the highest-numbered where two overlap), -1."""
-    nx = base.shape[0]
-    ny = base.shape[1]
-    for r, cx, cy in kappa:
-        kappa[r, cx, cy] = base[cx, cy]
-        carried[r, cx, cy] = vec2(0.0, 0.0)
-        owner[r, cx, cy] = -1
-    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
-        if alive[r, i] == 0:
+    nx = cells.base.shape[0]
+    ny = cells.base.shape[1]
+    for r, cx, cy in cells.cell_kappa:
+        cells.cell_kappa[r, cx, cy] = cells.base[cx, cy]
+        cells.carried[r, cx, cy] = vec2(0.0, 0.0)
+        cells.owner[r, cx, cy] = -1
+    for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
+        if bodies.alive[r, i] == 0:
             continue
-        xi = x[r, i]
-        c = ti.cos(th[r, i])
-        s = ti.sin(th[r, i])
+        xi = bodies.x[r, i]
+        c = ti.cos(bodies.theta[r, i])
+        s = ti.sin(bodies.theta[r, i])
         i0 = ti.max(ti.cast(ti.floor((xi.x - rb[i] - ox) / h - 0.5), ti.i32), 0)
         i1 = ti.min(ti.cast(ti.ceil((xi.x + rb[i] - ox) / h - 0.5), ti.i32), nx - 1)
         j0 = ti.max(ti.cast(ti.floor((xi.y - rb[i] - oy) / h - 0.5), ti.i32), 0)
         j1 = ti.min(ti.cast(ti.ceil((xi.y + rb[i] - oy) / h - 0.5), ti.i32), ny - 1)
         for a in range(i0, i1 + 1):
             for b in range(j0, j1 + 1):
-                if base[a, b] > 0.0:
+                if cells.base[a, b] > 0.0:
                     centre = vec2(ox + (a + 0.5) * h, oy + (b + 0.5) * h)
-                    if inside_body(sp[i], is_circle, trad, ls_phi, ls_grad, ls_meta, ls_geo,
-                                   rot_t(c, s, centre - xi)):
-                        ti.atomic_min(kappa[r, a, b], kp[sp[i]])
-                        ti.atomic_max(owner[r, a, b], i)
-                        carried[r, a, b] = vs[r, i] + spin(ws[r, i], centre - xi)
+                    if inside_body(templates, sp[i], rot_t(c, s, centre - xi)):
+                        ti.atomic_min(cells.cell_kappa[r, a, b], kp[sp[i]])
+                        ti.atomic_max(cells.owner[r, a, b], i)
+                        cells.carried[r, a, b] = (cells.vs[r, i]
+                                                  + spin(cells.ws[r, i], centre - xi))
 
 
 @ti.func
@@ -146,14 +155,10 @@ def _interval_shares(y):
 
 
 @ti.kernel
-def body_drift(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarray(),
-               w: ti.types.ndarray(), f: ti.types.ndarray(), tau: ti.types.ndarray(),
-               f_ext: ti.types.ndarray(), tau_ext: ti.types.ndarray(),
-               alive: ti.types.ndarray(), running: ti.types.ndarray(),
-               sp: ti.types.ndarray(), mass: ti.types.ndarray(), inertia: ti.types.ndarray(),
-               xi: ti.types.ndarray(), interval: ti.f64, gap: ti.f64, ox: ti.f64, oy: ti.f64,
-               h: ti.f64, past: ti.types.ndarray(), centre: ti.types.ndarray(),
-               mobility: ti.types.ndarray(), drift: ti.types.ndarray()):
+def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), sp: ti.types.ndarray(),
+               mass: ti.types.ndarray(), inertia: ti.types.ndarray(), xi: ti.types.ndarray(),
+               terms: _DRIFT, interval: ti.f64, gap: ti.f64, ox: ti.f64, oy: ti.f64,
+               h: ti.f64):
     """fluid.gmg.BodyTerms of every body but ``owner``: its mean velocity over the
     next fluid interval if the force it felt over the last one were held,
     ``drift = alpha v0 + g T F / m``, and how that changes with the pressure
@@ -164,70 +169,70 @@ def body_drift(x: ti.types.ndarray(), th: ti.types.ndarray(), v: ti.types.ndarra
     body without that history (just placed or re-inserted), the pressure force
     ``f`` of the last pressure at its present pose and the external load. Then
     ``past`` is set to now."""
-    for r, i in ti.ndrange(v.shape[0], v.shape[1]):
+    for r, i in ti.ndrange(bodies.v.shape[0], bodies.v.shape[1]):
         for q in ti.static(range(3)):
-            mobility[r, i, q] = 0.0
-            drift[r, i, q] = 0.0
-        centre[r, i, 0] = (ti.cast(x[r, i].x, ti.f64) - ox) / h - 0.5
-        centre[r, i, 1] = (ti.cast(x[r, i].y, ti.f64) - oy) / h - 0.5
-        now = ti.Vector([ti.cast(x[r, i].x, ti.f64), ti.cast(x[r, i].y, ti.f64),
-                         ti.cast(th[r, i], ti.f64)], dt=ti.f64)
-        vel = ti.Vector([ti.cast(v[r, i].x, ti.f64), ti.cast(v[r, i].y, ti.f64),
-                         ti.cast(w[r, i], ti.f64)], dt=ti.f64)
-        play = running[r] != 0 and alive[r, i] != 0
+            terms.mobility[r, i, q] = 0.0
+            terms.drift[r, i, q] = 0.0
+        terms.centre[r, i, 0] = (ti.cast(bodies.x[r, i].x, ti.f64) - ox) / h - 0.5
+        terms.centre[r, i, 1] = (ti.cast(bodies.x[r, i].y, ti.f64) - oy) / h - 0.5
+        now = ti.Vector([ti.cast(bodies.x[r, i].x, ti.f64),
+                         ti.cast(bodies.x[r, i].y, ti.f64),
+                         ti.cast(bodies.theta[r, i], ti.f64)], dt=ti.f64)
+        vel = ti.Vector([ti.cast(bodies.v[r, i].x, ti.f64),
+                         ti.cast(bodies.v[r, i].y, ti.f64),
+                         ti.cast(bodies.omega[r, i], ti.f64)], dt=ti.f64)
+        play = running[r] != 0 and bodies.alive[r, i] != 0
         if play:
             k = ti.cast(xi[sp[i]], ti.f64)
             alpha, g = _interval_shares(k * interval)
             inert = ti.Vector([ti.cast(mass[i], ti.f64), ti.cast(mass[i], ti.f64),
                                ti.cast(inertia[i], ti.f64)], dt=ti.f64)
             impulse = ti.Vector([0.0, 0.0, 0.0], dt=ti.f64)   # (mean force) T / inertia
-            if past[r, i, 6] != 0:
+            if terms.past[r, i, 6] != 0:
                 for q in ti.static(range(3)):
-                    impulse[q] = (vel[q] - past[r, i, 3 + q]) + k * (now[q] - past[r, i, q])
+                    impulse[q] = ((vel[q] - terms.past[r, i, 3 + q])
+                                  + k * (now[q] - terms.past[r, i, q]))
             else:
-                force = ti.Vector([ti.cast(f[r, i].x + f_ext[r, i].x, ti.f64),
-                                   ti.cast(f[r, i].y + f_ext[r, i].y, ti.f64),
-                                   ti.cast(tau[r, i] + tau_ext[r, i], ti.f64)], dt=ti.f64)
-                impulse = force * interval / inert
+                held, ext = bodies.f_fluid[r, i], bodies.f_ext[r, i]
+                load = ti.Vector([ti.cast(held.x + ext.x, ti.f64), ti.cast(held.y + ext.y, ti.f64),
+                                  ti.cast(bodies.tau_fluid[r, i] + bodies.tau_ext[r, i],
+                                          ti.f64)], dt=ti.f64)
+                impulse = load * interval / inert
             for q in ti.static(range(3)):
-                mobility[r, i, q] = gap * g * interval / inert[q]
-                drift[r, i, q] = alpha * vel[q] + g * impulse[q]
+                terms.mobility[r, i, q] = gap * g * interval / inert[q]
+                terms.drift[r, i, q] = alpha * vel[q] + g * impulse[q]
         for q in ti.static(range(3)):
-            past[r, i, q] = now[q]
-            past[r, i, 3 + q] = vel[q]
-        past[r, i, 6] = 1.0 if play else 0.0
+            terms.past[r, i, q] = now[q]
+            terms.past[r, i, 3 + q] = vel[q]
+        terms.past[r, i, 6] = 1.0 if play else 0.0
 
 
 @ti.kernel
-def pressure_forces(x: ti.types.ndarray(), th: ti.types.ndarray(),
-                    alive: ti.types.ndarray(), running: ti.types.ndarray(),
-                    which: ti.types.ndarray(),
-                    sp: ti.types.ndarray(), node_pos: ti.types.ndarray(),
-                    node_area: ti.types.ndarray(), node_meta: ti.types.ndarray(),
-                    pres: ti.types.ndarray(), active: ti.types.ndarray(),
-                    f: ti.types.ndarray(), tau: ti.types.ndarray(), ox: float, oy: float,
-                    h: float, gap: float, mode: ti.i32):
-    """Set ``f``, ``tau`` of every body of the realizations with ``which[r] != 0``
-    to its pressure force and moment (0 where not running or not alive); the other
-    realizations' are left as they are."""
-    for r, i in ti.ndrange(x.shape[0], x.shape[1]):
+def pressure_forces(bodies: _HELD, running: ti.types.ndarray(), which: ti.types.ndarray(),
+                    sp: ti.types.ndarray(), templates: _NODES, pres: ti.types.ndarray(),
+                    active: ti.types.ndarray(), ox: float, oy: float, h: float, gap: float,
+                    mode: ti.i32):
+    """Set ``f_fluid``, ``tau_fluid`` of every body of the realizations with
+    ``which[r] != 0`` to its pressure force and moment (0 where not running or
+    not alive); the other realizations' are left as they are."""
+    for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
         if which[r] != 0:
             fsum = vec2(0.0, 0.0)
             msum = 0.0
-            if running[r] != 0 and alive[r, i] != 0:
-                xi = x[r, i]
-                c = ti.cos(th[r, i])
-                s = ti.sin(th[r, i])
-                off = node_meta[sp[i], 0]
-                for k in range(node_meta[sp[i], 1]):
-                    p = node_world(node_pos, off + k, xi, c, s)
+            if running[r] != 0 and bodies.alive[r, i] != 0:
+                xi = bodies.x[r, i]
+                c = ti.cos(bodies.theta[r, i])
+                s = ti.sin(bodies.theta[r, i])
+                off = templates.node_meta[sp[i], 0]
+                for k in range(templates.node_meta[sp[i], 1]):
+                    p = node_world(templates.node_pos, off + k, xi, c, s)
                     sigma = sample_pressure(pres, active, r, p, ox, oy, h, mode)
-                    df = -sigma * gap * rot(c, s, vec2(node_area[off + k, 0],
-                                                       node_area[off + k, 1]))
+                    df = -sigma * gap * rot(c, s, vec2(templates.node_area[off + k, 0],
+                                                       templates.node_area[off + k, 1]))
                     fsum += df
                     msum += cross(p - xi, df)
-            f[r, i] = fsum
-            tau[r, i] = msum
+            bodies.f_fluid[r, i] = fsum
+            bodies.tau_fluid[r, i] = msum
 
 
 @ti.kernel
@@ -282,6 +287,8 @@ class FluidCoupling:
         self.w_src = np.zeros((n_real, n_part))
         self.vs = state._zeros((n_real, n_part), vector=True)
         self.ws = state._zeros((n_real, n_part))
+        self._cells = _CELLS(base=self.base, cell_kappa=self.kappa, carried=self.carried,
+                             owner=self.owner, vs=self.vs, ws=self.ws)
         # the realizations apply_forces sets: all of them, or those it is given
         self._every = state.array(np.ones(n_real, dtype=np.int32), ti.i32)
         self._chosen = state._zeros(n_real, ti.i32)
@@ -289,6 +296,7 @@ class FluidCoupling:
         # bodies' terms of the pressure solve, made on the first update
         self.implicit = bool(fl.particle_flux) and fl.flux_coupling == "implicit"
         self.terms = None
+        self._drift = None      # their pack with past (_DRIFT)
         # per body at the last solve: x, y, theta, v_x, v_y, omega, in play (1/0)
         self.past = state._zeros((n_real, n_part, 7), ti.f64) if self.implicit else None
         self.interval = float(fl.update_interval) * float(model.dt)
@@ -313,9 +321,9 @@ class FluidCoupling:
         if only is not None:
             which = self._chosen
             which.from_numpy(np.asarray(only, dtype=np.int32))
-        pressure_forces(b.x, b.theta, b.alive, batch.running, which, particles.species,
-                        t.node_pos, t.node_area, t.node_meta, self.pres, self.active,
-                        b.f_fluid, b.tau_fluid, *self.grid, self.gap, self.sampling)
+        pressure_forces(b.pack_of(_HELD), batch.running, which, particles.species,
+                        t.pack_of(_NODES), self.pres, self.active, *self.grid, self.gap,
+                        self.sampling)
 
     def forget_velocity(self, r: int, i: int):
         """Body ``i`` of realization ``r`` was re-inserted: it carries no flux yet."""
@@ -339,13 +347,12 @@ class FluidCoupling:
         R, N = self.v_src.shape[:2]
         if self.terms is None:
             self.terms = BodyTerms(self.owner, *(ti.ndarray(ti.f64, (R, N, c)) for c in (2, 3, 3)))
-        k = self.terms
-        body_drift(b.x, b.theta, b.v, b.omega, b.f_fluid, b.tau_fluid, b.f_ext, b.tau_ext,
-                   b.alive,
-                   batch.running, particles.species, particles.mass, particles.inertia,
-                   materials.xi, self.interval, self.gap, *self.grid, self.past, k.centre,
-                   k.mobility, k.drift)
-        return k
+            self._drift = _DRIFT(past=self.past, centre=self.terms.centre,
+                                 mobility=self.terms.mobility, drift=self.terms.drift)
+        body_drift(b.pack(), batch.running, particles.species, particles.mass,
+                   particles.inertia, materials.xi, self._drift, self.interval, self.gap,
+                   *self.grid)
+        return self.terms
 
     def _source_velocities(self, bodies):
         """Velocities of the carried flux: each particle's current velocity averaged
@@ -374,10 +381,8 @@ class FluidCoupling:
         if flux:
             self._source_velocities(bodies)
         b, t = bodies, templates
-        rasterize_permeability(b.x, b.theta, b.alive, particles.species,
-                               particles.bounding_radius, materials.kappa, t.is_circle,
-                               t.radius, t.ls_phi, t.ls_grad, t.ls_meta, t.ls_geo, self.base,
-                               self.kappa, self.vs, self.ws, self.carried, self.owner,
+        rasterize_permeability(b.pack_of(_POSE), particles.species, particles.bounding_radius,
+                               materials.kappa, t.pack_of(_LEVEL_SETS), self._cells,
                                *self.grid)
         self.updates += 1
         frac = m.scene.fluid.resolve_fraction

@@ -23,9 +23,13 @@ body: CG applies as before, preconditioned by the multigrid of ``A`` alone.
 
 Arrays: ``owner`` (R, nx, ny) int32 (-1: no body), ``centre`` (R, N, 2) float64
 in cell units (cell ``(i, j)``'s centre at ``(i, j)``), ``mobility`` (R, N, 3)
-``H M`` (0 for a body out of play), ``drift`` (R, N, 3) ``q``; work arrays
-``y``, ``z`` (R, N, 3), ``box`` (R, N, 4) int32 (each body's box of cells,
-found by :func:`_body_rhs`). Each body's sum runs over the cells it owns in cell
+``H M`` (0 for a body out of play), ``drift`` (R, N, 3) ``q``. The kernels take
+them as one argument pack of type :data:`Terms`: ``owner``, the grid's
+``unknown`` cells, ``body`` (R, N, 11) float64 with named columns (the centre
+and ``H M``, copied in by :func:`_body_rhs`, and the work vectors ``y = S^T x``,
+``z = H M y``) and ``box`` (R, N, 4) int32 (each body's box of cells, found by
+:func:`_body_rhs`): four arrays, not seven, as each array costs a launch of the
+CG kernels about 3.5 us. Each body's sum runs over the cells it owns in cell
 order, each cell's over its four faces, in one thread each: a realization's
 result depends on nothing else in the batch, nor on how the threads are laid out.
 Package-internal: :mod:`.gmg` is the API."""
@@ -34,6 +38,14 @@ from ..backend import ti
 from ._gmg_cycle import _BASE, _NX, _NY, _RHS, _SOL, _Cells, _Field, _Ints, _Rows, _index
 
 _Owner = ti.types.ndarray(dtype=ti.i32, ndim=3)   # (R, nx, ny): a body's number or -1
+
+# Columns of ``body``: the centre (x, y), then the first of three (x, y, rotation)
+# each for ``H M``, ``y`` and ``z``.
+_CX, _CY, _MOB, _Y, _Z = 0, 1, 2, 5, 8
+BODY_COLUMNS = 11
+
+#: The bodies' arrays of the CG kernels (module docstring).
+Terms = ti.types.argpack(owner=_Owner, unknown=_Cells, body=_Field, box=_Owner)
 
 
 @ti.func
@@ -69,25 +81,31 @@ def _near_body(owner: ti.template(), r, i, j):
 
 
 @ti.func
-def _cell_velocity(owner: ti.template(), centre: ti.template(), z: ti.template(), r, i, j,
-                   dx, dy):
+def _cell_velocity(terms: ti.template(), r, i, j, dx, dy):
     """``v + omega z x r_c`` of the body owning (i, j) in the generalized
     velocities ``z``; 0 in a cell no body owns."""
     v = ti.Vector([0.0, 0.0], dt=ti.f64)
-    o = owner[r, i, j]
+    o = terms.owner[r, i, j]
     if o >= 0:
-        rx = (i - centre[r, o, 0]) * dx
-        ry = (j - centre[r, o, 1]) * dy
-        v = ti.Vector([z[r, o, 0] - z[r, o, 2] * ry, z[r, o, 1] + z[r, o, 2] * rx], dt=ti.f64)
+        rx = (i - terms.body[r, o, _CX]) * dx
+        ry = (j - terms.body[r, o, _CY]) * dy
+        z = ti.Vector([terms.body[r, o, _Z + m] for m in ti.static(range(3))], dt=ti.f64)
+        v = ti.Vector([z[0] - z[2] * ry, z[1] + z[2] * rx], dt=ti.f64)
     return v
 
 
 @ti.func
-def _gather_body(cg: ti.template(), src, owner: ti.template(), unknown: ti.template(),
-                 centre: ti.template(), y: ti.template(), box: ti.template(), geo: ti.template(),
-                 dx, dy, r, o):
+def _gather_body(cg: ti.template(), src, terms: ti.template(), geo: ti.template(), dx, dy, r,
+                 o):
     """``y[r, o] = (S^T cg[src])`` of body o: its owned cells, in cell order, found
     in its box of cells (``box``, made by :func:`_body_rhs`)."""
+    _gather(cg, src, terms.owner, terms.unknown, terms.body, terms.box, geo, dx, dy, r, o)
+
+
+@ti.func
+def _gather(cg: ti.template(), src, owner: ti.template(), unknown: ti.template(),
+            body: ti.template(), box: ti.template(), geo: ti.template(), dx, dy, r, o):
+    """:func:`_gather_body` on the members of its pack (Taichi cannot alias them)."""
     ny = geo[0, _NY]
     gx_sum = ti.f64(0.0)
     gy_sum = ti.f64(0.0)
@@ -112,32 +130,32 @@ def _gather_body(cg: ti.template(), src, owner: ti.template(), unknown: ti.templ
                 w = _face_weight(owner, unknown, r, i, j, i, j - 1, dx)
                 if w > 0:
                     gy += (d - cg[src, k - 1]) * w
-                rx = (i - centre[r, o, 0]) * dx
-                ry = (j - centre[r, o, 1]) * dy
+                rx = (i - body[r, o, _CX]) * dx
+                ry = (j - body[r, o, _CY]) * dy
                 gx_sum += gx
                 gy_sum += gy
                 tau += rx * gy - ry * gx
-    y[r, o, 0] = gx_sum
-    y[r, o, 1] = gy_sum
-    y[r, o, 2] = tau
+    body[r, o, _Y] = gx_sum
+    body[r, o, _Y + 1] = gy_sum
+    body[r, o, _Y + 2] = tau
 
 
 @ti.func
-def _spread_cell(cg: ti.template(), base, owner: ti.template(), unknown: ti.template(),
-                 centre: ti.template(), z: ti.template(), geo: ti.template(), dx, dy, r, i, j):
+def _spread_cell(cg: ti.template(), base, terms: ti.template(), geo: ti.template(), dx, dy, r,
+                 i, j):
     """``cg[base] + (S z)`` at cell (i, j) of realization r (``base < 0``:
     ``S z``): the carried flux into the cell, net."""
     k = _index(geo, 0, r, i, j)
     val = ti.f64(0.0)
-    if unknown[r, i, j] != 0 and _near_body(owner, r, i, j):
-        here = _cell_velocity(owner, centre, z, r, i, j, dx, dy)
+    if terms.unknown[r, i, j] != 0 and _near_body(terms.owner, r, i, j):
+        here = _cell_velocity(terms, r, i, j, dx, dy)
         for di, dj, comp, sign in ti.static(((-1, 0, 0, 1.0), (1, 0, 0, -1.0),
                                              (0, -1, 1, 1.0), (0, 1, 1, -1.0))):
             i2, j2 = i + di, j + dj
             length = dy if ti.static(comp == 0) else dx
-            w = _face_weight(owner, unknown, r, i, j, i2, j2, length)
-            if w > 0 and (owner[r, i, j] >= 0 or owner[r, i2, j2] >= 0):
-                there = _cell_velocity(owner, centre, z, r, i2, j2, dx, dy)
+            w = _face_weight(terms.owner, terms.unknown, r, i, j, i2, j2, length)
+            if w > 0 and (terms.owner[r, i, j] >= 0 or terms.owner[r, i2, j2] >= 0):
+                there = _cell_velocity(terms, r, i2, j2, dx, dy)
                 val += sign * (here[comp] + there[comp]) * w
     if base >= 0:
         val += cg[base, k]
@@ -145,54 +163,79 @@ def _spread_cell(cg: ti.template(), base, owner: ti.template(), unknown: ti.temp
 
 
 @ti.func
-def _product_of(cg: ti.template(), src, dst, owner: ti.template(), unknown: ti.template(),
-                centre: ti.template(), mobility: ti.template(), y: ti.template(),
-                z: ti.template(), box: ti.template(), geo: ti.template(), dx, dy, r):
-    """``cg[dst] = S (H M) S^T cg[src]`` of realization r, at every cell, serially
-    (in the thread that runs the realization's whole solve)."""
-    for o in range(y.shape[1]):
-        _gather_body(cg, src, owner, unknown, centre, y, box, geo, dx, dy, r, o)
-        for m in ti.static(range(3)):
-            z[r, o, m] = mobility[r, o, m] * y[r, o, m]
-    for i in range(geo[0, _NX]):
-        for j in range(geo[0, _NY]):
-            cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, owner, unknown, centre,
-                                                            z, geo, dx, dy, r, i, j)
+def _set_z(body: ti.template(), r, o):
+    """``z = H M y`` of body o."""
+    for m in ti.static(range(3)):
+        body[r, o, _Z + m] = body[r, o, _MOB + m] * body[r, o, _Y + m]
 
 
 @ti.func
-def _product(cg: ti.template(), src, dst, flags: ti.template(), running, owner: ti.template(),
-             unknown: ti.template(), centre: ti.template(), mobility: ti.template(),
-             y: ti.template(), z: ti.template(), box: ti.template(), geo: ti.template(), dx, dy):
+def _product_of(cg: ti.template(), src, dst, terms: ti.template(), geo: ti.template(), dx, dy,
+                r):
+    """``cg[dst] = S (H M) S^T cg[src]`` of realization r, at every cell, serially
+    (in the thread that runs the realization's whole solve)."""
+    for o in range(terms.body.shape[1]):
+        _gather_body(cg, src, terms, geo, dx, dy, r, o)
+        _set_z(terms.body, r, o)
+    for i in range(geo[0, _NX]):
+        for j in range(geo[0, _NY]):
+            cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, terms, geo, dx, dy, r, i,
+                                                            j)
+
+
+@ti.func
+def _product(cg: ti.template(), src, dst, flags: ti.template(), running, terms: ti.template(),
+             geo: ti.template(), dx, dy):
     """``cg[dst] = S (H M) S^T cg[src]`` of every running realization (flag
     ``running`` of ``flags``), in two top-level loops: a thread per body, then a
     thread per grid column. Each body's sum runs over its own cells in cell order and
     each cell's over its four faces, so the bits are those of :func:`_product_of`."""
-    R, N = y.shape[0], y.shape[1]
+    R, N = terms.body.shape[0], terms.body.shape[1]
     for r, o in ti.ndrange(R, N):
         if flags[r, running]:
-            _gather_body(cg, src, owner, unknown, centre, y, box, geo, dx, dy, r, o)
-            for m in ti.static(range(3)):
-                z[r, o, m] = mobility[r, o, m] * y[r, o, m]
+            _gather_body(cg, src, terms, geo, dx, dy, r, o)
+            _set_z(terms.body, r, o)
     nx, ny = geo[0, _NX], geo[0, _NY]
     for t in range(R * nx):  # a thread per grid column: a third faster than per cell
         r, i = t // nx, t % nx
         if flags[r, running]:
             for j in range(ny):
-                cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, owner, unknown,
-                                                                centre, z, geo, dx, dy, r, i, j)
+                cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, terms, geo, dx, dy,
+                                                                r, i, j)
 
 
 @ti.kernel
-def _body_rhs(cg: _Rows, owner: _Owner, unknown: _Cells, centre: _Field, mobility: _Field,
-              drift: _Field, y: _Field, z: _Field, box: _Owner, geo: _Ints, dx: ti.f64,
-              dy: ti.f64):
-    """Each body's box of cells (the smallest holding the cells it owns; empty
-    if none), then ``RHS = BASE + S (q + (H M) S^T SOL)``, SOL being the
-    initial guess."""
-    R, N = y.shape[0], y.shape[1]
+def _body_rhs(cg: _Rows, terms: Terms, centre: _Field, mobility: _Field, drift: _Field,
+              geo: _Ints, dx: ti.f64, dy: ti.f64):
+    """``terms.body``'s centre and ``H M`` columns from ``centre`` and ``mobility``;
+    each body's box of cells (the smallest holding the cells it owns; empty if
+    none); then ``RHS = BASE + S (q + (H M) S^T SOL)``, SOL being the initial
+    guess."""
+    _load_terms(terms.owner, terms.body, terms.box, centre, mobility, geo)
+    R, N = terms.body.shape[0], terms.body.shape[1]
+    for r, o in ti.ndrange(R, N):
+        _gather_body(cg, _SOL, terms, geo, dx, dy, r, o)
+        for m in ti.static(range(3)):
+            terms.body[r, o, _Z + m] = (drift[r, o, m]
+                                        + terms.body[r, o, _MOB + m] * terms.body[r, o, _Y + m])
+    nx, ny = geo[0, _NX], geo[0, _NY]
+    for r, i, j in ti.ndrange(R, nx, ny):
+        cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(cg, _BASE, terms, geo, dx, dy, r, i,
+                                                         j)
+
+
+@ti.func
+def _load_terms(owner: ti.template(), body: ti.template(), box: ti.template(),
+                centre: ti.template(), mobility: ti.template(), geo: ti.template()):
+    """The first passes of :func:`_body_rhs`: the centre and ``H M`` columns of
+    ``body``, then each body's box of cells."""
+    R, N = body.shape[0], body.shape[1]
     nx, ny = geo[0, _NX], geo[0, _NY]
     for r, o in ti.ndrange(R, N):
+        body[r, o, _CX] = centre[r, o, 0]
+        body[r, o, _CY] = centre[r, o, 1]
+        for m in ti.static(range(3)):
+            body[r, o, _MOB + m] = mobility[r, o, m]
         box[r, o, 0], box[r, o, 1], box[r, o, 2], box[r, o, 3] = nx, -1, ny, -1
     for r, i, j in ti.ndrange(R, nx, ny):
         o = owner[r, i, j]
@@ -201,10 +244,3 @@ def _body_rhs(cg: _Rows, owner: _Owner, unknown: _Cells, centre: _Field, mobilit
             ti.atomic_max(box[r, o, 1], i)
             ti.atomic_min(box[r, o, 2], j)
             ti.atomic_max(box[r, o, 3], j)
-    for r, o in ti.ndrange(R, N):
-        _gather_body(cg, _SOL, owner, unknown, centre, y, box, geo, dx, dy, r, o)
-        for m in ti.static(range(3)):
-            z[r, o, m] = drift[r, o, m] + mobility[r, o, m] * y[r, o, m]
-    for r, i, j in ti.ndrange(R, nx, ny):
-        cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(cg, _BASE, owner, unknown, centre,
-                                                         z, geo, dx, dy, r, i, j)

@@ -8,7 +8,7 @@ from ._gmg_cycle import (_ADIR, _ALPHA, _B, _BB, _BETA, _Cells, _Chol, _DIR, _Fi
                          _INLET, _ITERS, _Ints, _NX, _NY, _Ops, _PW, _RES, _RHS, _RR,
                          _RUNNING, _RZ, _Rows, _SOL, _Sides, _TASK, _UNDRIVEN, _X, _apply,
                          _cycle_of, _diagonal, _index, _lanes, _segment, _segments)
-from ._gmg_bodies import _Owner, _product, _product_of
+from ._gmg_bodies import Terms, _product, _product_of
 
 # ---------------------------------------------------------------- CG pieces
 # Per-cell steps of CG on the finest level (k: flat index, s: column stride),
@@ -52,13 +52,10 @@ def _matvec_b(op: ti.template(), mg: ti.template(), cg: ti.template(), state: ti
 
 @ti.func
 def _bodies_apply(cg: ti.template(), src, flags: ti.template(), geo: ti.template(),
-                  owner: ti.template(), unknown: ti.template(), centre: ti.template(),
-                  mobility: ti.template(), y: ti.template(), z: ti.template(),
-                  box: ti.template(), dx, dy):
+                  terms: ti.template(), dx, dy):
     """``cg[_PW] = S (H M) S^T cg[src]`` of every running realization (top-level
     loops: they complete before the next one starts)."""
-    _product(cg, src, _PW, flags, _RUNNING, owner, unknown, centre, mobility, y, z, box, geo,
-             dx, dy)
+    _product(cg, src, _PW, flags, _RUNNING, terms, geo, dx, dy)
 
 
 @ti.func
@@ -231,11 +228,11 @@ def _after_step(part: ti.template(), state: ti.template(), flags: ti.template(),
 def _residual_check(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows,
                     flags: _Ints, geo: _Ints, tol2: ti.f64, maxiter: ti.i32,
                     initial: ti.template(), cells: ti.template(), bodies: ti.template(),
-                    owner: _Owner, unknown: _Cells, centre: _Field, mobility: _Field,
-                    y: _Field, z: _Field, box: _Owner, dx: ti.f64, dy: ti.f64) -> ti.i32:
+                    terms: Terms, dx: ti.f64, dy: ti.f64) -> ti.i32:
     """True residual ``r = b - A x`` of every realization and whether it must
     (go on) iterate; returns how many must. ``initial``: at the start of a solve
-    (counters reset, |b| computed, the guess cleared where _clear says)."""
+    (counters reset, |b| computed, the guess cleared where _clear says).
+    ``bodies``: whether the moving bodies' ``terms`` (:mod:`._gmg_bodies`) apply."""
     R, n = flags.shape[0], geo[0, _NX] * _segments(geo[0, _NY])  # segment sums each
     for r in range(R):
         flags[r, _RUNNING] = 1
@@ -247,8 +244,7 @@ def _residual_check(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows,
             _set_norm_b(part, state, flags, r, n)
         _for_cells(_clear, op, mg, cg, state, flags, geo, cells)
     if ti.static(bodies):
-        _bodies_apply(cg, _SOL, flags, geo, owner, unknown, centre, mobility, y, z, box, dx,
-                      dy)
+        _bodies_apply(cg, _SOL, flags, geo, terms, dx, dy)
         _for_cells_and_sum(_residual_b, op, mg, cg, state, flags, geo, cells, mg, _B, mg, _B,
                            part)
     else:
@@ -276,15 +272,12 @@ def _cg_direction(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows,
 @ti.kernel
 def _cg_step(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags: _Ints,
              geo: _Ints, tol2: ti.f64, maxiter: ti.i32, cells: ti.template(),
-             bodies: ti.template(), owner: _Owner, unknown: _Cells, centre: _Field,
-             mobility: _Field, y: _Field, z: _Field, box: _Owner, dx: ti.f64,
-             dy: ti.f64) -> ti.i32:
+             bodies: ti.template(), terms: Terms, dx: ti.f64, dy: ti.f64) -> ti.i32:
     """``x += alpha d``, ``r -= alpha A d`` with ``alpha = r.z / d.Ad``; stop the
     realizations whose residual meets the tolerance; returns how many go on."""
     R, n = flags.shape[0], geo[0, _NX] * _segments(geo[0, _NY])  # segment sums each
     if ti.static(bodies):
-        _bodies_apply(cg, _DIR, flags, geo, owner, unknown, centre, mobility, y, z, box, dx,
-                      dy)
+        _bodies_apply(cg, _DIR, flags, geo, terms, dx, dy)
         _for_cells_and_sum(_matvec_b, op, mg, cg, state, flags, geo, cells, cg, _DIR, cg,
                            _ADIR, part)
     else:
@@ -305,27 +298,22 @@ def _cg_step(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags: _
 @ti.kernel
 def _solve_each(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags: _Ints,
                 geo: _Ints, chol: _Chol, tol2: ti.f64, maxiter: ti.i32, alpha: ti.f64,
-                bodies: ti.template(), owner: _Owner, unknown: _Cells, centre: _Field,
-                mobility: _Field, y: _Field, z: _Field, box: _Owner, dx: ti.f64,
-                dy: ti.f64):
+                bodies: ti.template(), terms: Terms, dx: ti.f64, dy: ti.f64):
     """The whole CG solve, one thread per realization: the steps of
     _residual_check, _cg_direction and _cg_step with _cycle_of, in one launch."""
-    R, n = flags.shape[0], geo[0, _NX] * _segments(geo[0, _NY])  # segment sums each
-    for t in range(R * _TASK):  # one realization per thread (see _TASK)
+    for t in range(flags.shape[0] * _TASK):  # one realization per thread (see _TASK)
         if t % _TASK == 0:
-            _solve_one(op, mg, cg, part, state, flags, geo, chol, t // _TASK, n, tol2,
-                       maxiter, alpha, bodies, owner, unknown, centre, mobility, y, z, box,
-                       dx, dy)
+            _solve_one(op, mg, cg, part, state, flags, geo, chol, t // _TASK, tol2, maxiter,
+                       alpha, bodies, terms, dx, dy)
 
 
 @ti.func
 def _solve_one(op: ti.template(), mg: ti.template(), cg: ti.template(), part: ti.template(),
                state: ti.template(), flags: ti.template(), geo: ti.template(),
-               chol: ti.template(), r, n, tol2, maxiter, alpha, bodies: ti.template(),
-               owner: ti.template(), unknown: ti.template(), centre: ti.template(),
-               mobility: ti.template(), y: ti.template(), z: ti.template(), box: ti.template(),
-               dx, dy):
+               chol: ti.template(), r, tol2, maxiter, alpha, bodies: ti.template(),
+               terms: ti.template(), dx, dy):
     """The CG solve of realization r, serially (see _solve_each)."""
+    n = geo[0, _NX] * _segments(geo[0, _NY])  # segment sums each
     flags[r, _ITERS] = 0
     _segment_sums_of(cg, _RHS, cg, _RHS, part, 1, geo, r)
     _set_norm_b(part, state, flags, r, n)
@@ -333,8 +321,7 @@ def _solve_one(op: ti.template(), mg: ti.template(), cg: ti.template(), part: ti
     checked = 0
     while not checked:
         if ti.static(bodies):
-            _product_of(cg, _SOL, _PW, owner, unknown, centre, mobility, y, z, box, geo, dx,
-                        dy, r)
+            _product_of(cg, _SOL, _PW, terms, geo, dx, dy, r)
             _for_cells_of(_residual_b, op, mg, cg, state, flags, geo, r)
         else:
             _for_cells_of(_residual, op, mg, cg, state, flags, geo, r)
@@ -349,8 +336,7 @@ def _solve_one(op: ti.template(), mg: ti.template(), cg: ti.template(), part: ti
             _for_cells_of(_direction, op, mg, cg, state, flags, geo, r)
             first = 0
             if ti.static(bodies):
-                _product_of(cg, _DIR, _PW, owner, unknown, centre, mobility, y, z, box, geo,
-                            dx, dy, r)
+                _product_of(cg, _DIR, _PW, terms, geo, dx, dy, r)
                 _for_cells_of(_matvec_b, op, mg, cg, state, flags, geo, r)
             else:
                 _for_cells_of(_matvec, op, mg, cg, state, flags, geo, r)

@@ -91,7 +91,7 @@ from scipy import ndimage
 from ..backend import BackendError, ti
 from .solver import FluxImbalanceError, SolveInfo
 from .system import FiniteVolumeSystem
-from ._gmg_bodies import _body_rhs
+from ._gmg_bodies import BODY_COLUMNS, Terms, _body_rhs
 from ._gmg_cg import (_boundary_fluxes, _cg_direction, _cg_step, _pressure, _residual_check,
                       _solve_each)
 from ._gmg_cycle import (COARSEST_CELLS, MAXITER, OVERCORRECTION, REALIZATION_CELLS,
@@ -312,11 +312,12 @@ class TaichiPressureSolver:
         self._blocked = np.zeros(R, dtype=bool)
         self._had_zeros = np.zeros(R, dtype=bool)  # zero kappa at the last change
         # stand-ins for the bodies' arrays in solves without them (never read)
-        self._no_bodies = (_upload(np.full((1, 1, 1), -1), ti.i32),
-                           *(_upload(np.zeros((1, 1, 3)), ti.f64) for _ in range(4)),
-                           _upload(np.full((1, 1, 4), -1), ti.i32))
+        self._no_bodies = Terms(owner=_upload(np.full((1, 1, 1), -1), ti.i32),
+                                unknown=self._unknown,
+                                body=_upload(np.zeros((1, 1, BODY_COLUMNS)), ti.f64),
+                                box=_upload(np.full((1, 1, 4), -1), ti.i32))
         self._bodies = None                        # those of the solve under way
-        self._body_work = None   # (y, z, box): S^T x, H M y and the box of cells per body
+        self._terms = None   # their pack (Terms), kept while the same arrays come
 
     # ------------------------------------------------------------------ public
     def solve(self, kappa, x0=None, carried=None, occupied=None, *, host=True, bodies=None):
@@ -495,21 +496,19 @@ class TaichiPressureSolver:
             got = tuple(getattr(bodies, name).shape)
             if got != shape:
                 raise ValueError(f"bodies.{name} must have shape {shape}, got {got}")
-        if self._body_work is None or tuple(self._body_work[0].shape) != (R, n, 3):
-            self._body_work = (ti.ndarray(ti.f64, (R, n, 3)), ti.ndarray(ti.f64, (R, n, 3)),
-                               ti.ndarray(ti.i32, (R, n, 4)))
-        _body_rhs(self._cg, bodies.owner, self._unknown, bodies.centre, bodies.mobility,
-                  bodies.drift, *self._body_work, self._geo, self.dx, self.dy)
+        t = self._terms
+        if t is None or t["owner"] is not bodies.owner or tuple(t["box"].shape) != (R, n, 4):
+            self._terms = t = Terms(owner=bodies.owner, unknown=self._unknown,
+                                    body=ti.ndarray(ti.f64, (R, n, BODY_COLUMNS)),
+                                    box=ti.ndarray(ti.i32, (R, n, 4)))
+        _body_rhs(self._cg, t, bodies.centre, bodies.mobility, bodies.drift, self._geo,
+                  self.dx, self.dy)
 
     def _body_args(self):
-        """(whether the bodies' terms apply, their arrays) for the CG kernels."""
-        b = self._bodies
-        if b is None:
-            owner, centre, mobility, y, z, box = self._no_bodies
-            return (False, owner, self._unknown, centre, mobility, y, z, box, self.dx,
-                    self.dy)
-        return (True, b.owner, self._unknown, b.centre, b.mobility, *self._body_work,
-                self.dx, self.dy)
+        """(whether the bodies' terms apply, their pack, dx, dy) for the CG kernels."""
+        if self._bodies is None:
+            return False, self._no_bodies, self.dx, self.dy
+        return True, self._terms, self.dx, self.dy
 
     def _iterate(self):
         """Preconditioned CG of every realization until each meets ``tol`` (or
