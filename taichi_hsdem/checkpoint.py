@@ -46,7 +46,12 @@ RESULT_STATUSES = ("ok", "unstable")
 HOST_ARRAYS = {"host.last_escape_t": "last_escape_t", "host.escaped": "escaped_np",
                "host.arch_static_t": "arch_static_t",
                "host.escaped_by_species": "escaped_by_species",
-               "host.unfed_by_species": "unfed_by_species"}
+               "host.unfed_by_species": "unfed_by_species",
+               "host.throat_passages": "throat_passages",
+               "host.throat_last_passage_t": "throat_last_passage_t",
+               "host.throat_static_t": "throat_static_t",
+               "host.throat_t_clog": "throat_t_clog",
+               "host.check_x": "check_x", "host.check_alive": "check_alive"}
 
 
 class CheckpointError(ValueError):
@@ -361,6 +366,8 @@ def _check_progress(host, sim, path) -> None:
                               f"{sim.N} bodies can fill")
 
 
+#: Host arrays where NaN means "none yet" (no static arch, no clog).
+_NAN_IS_NONE = {"host.arch_static_t", "host.throat_static_t", "host.throat_t_clog"}
 # Arrays whose values must be finite in every realization that has not gone
 # unstable (an unstable one keeps the state it failed in, for the record).
 _FINITE = {f"bodies.{k}" for k in ("x", "theta", "v", "omega", "force", "torque", "f_fluid",
@@ -422,10 +429,12 @@ def _read_arrays(sim, path, host) -> dict:
               "neighbors.nbr_n": (0, N), "history.0.partners": (0, N + 1),
               "history.1.partners": (0, N + 1), "host.last_escape_t": (0, t),
               "host.escaped_by_species": (0, None), "host.unfed_by_species": (0, N),
-              "host.arch_static_t": (0, t)}     # (NaN: no static arch yet)
+              "host.arch_static_t": (0, t),     # (NaN: no static arch yet)
+              "host.throat_passages": (0, None), "host.throat_last_passage_t": (0, t),
+              "host.throat_static_t": (0, t), "host.throat_t_clog": (0, t)}
     for name, (low, high) in bounds.items():
         value = arrays[name]
-        value = value[~np.isnan(value)] if name == "host.arch_static_t" else value
+        value = value[~np.isnan(value)] if name in _NAN_IS_NONE else value
         if value.size and (value.min() < low or (high is not None and value.max() > high)):
             raise CheckpointError(f"{path}: {name}: values outside [{low}, "
                                   f"{'inf' if high is None else high}]")

@@ -79,6 +79,21 @@ def write_flow(flow, statuses, out: Path):
     atomic_write(out / "flow.csv", buf.getvalue())
 
 
+def write_throats(rows, statuses, out: Path):
+    """``throats.csv``: realization,throat,x,y,width,passages,clogged,t_clog (m, s;
+    t_clog empty for an open throat), one row per throat of each realization at
+    the end of the run; unstable realizations are left out."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["realization", "throat", "x", "y", "width", "passages", "clogged", "t_clog"])
+    for r, k, x, y, width, passages, clogged, t_clog in rows:
+        if statuses[r] != "unstable":
+            w.writerow([r, k, repr(float(x)), repr(float(y)), repr(float(width)), int(passages),
+                        "true" if clogged else "false",
+                        "" if t_clog is None else repr(float(t_clog))])
+    atomic_write(out / "throats.csv", buf.getvalue())
+
+
 def write_series(series, statuses, out: Path):
     """``escapees.csv``: realization,t,escapees; unstable realizations are left out."""
     buf = io.StringIO()
@@ -91,7 +106,8 @@ def write_series(series, statuses, out: Path):
 
 
 #: Files (and folders) a run writes into its output folder.
-RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "flow.csv", "summary.json", "video.mp4",
+RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "flow.csv", "throats.csv", "summary.json",
+                "video.mp4",
                 "escapees.png", "pmf.png", "series.pvd", "vtk", checkpoint.FILE)
 #: The list of the files the runs of this project wrote in a folder: only these
 #: are ever replaced or removed there.
@@ -237,6 +253,9 @@ class Staging:
         if result.flow:
             write_flow(result.flow, statuses, self.tmp)
             names.insert(2, "flow.csv")
+        if result.throats:
+            write_throats(result.throats, statuses, self.tmp)
+            names.insert(names.index("escapees.csv") + 1, "throats.csv")
         write_summary(result.summary, self.tmp)
         earlier = owned_files(self.out)
         kept = set(names) | {"summary.json", checkpoint.FILE}

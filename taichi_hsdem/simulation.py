@@ -31,6 +31,7 @@ from .dem import contact, coupling, fused, integrate, state
 from .layout import BAD_FAST, BAD_NAN, BAD_PASSED, F_HISTORY_OVERFLOW, F_REBUILD
 from .dem.neighbors import NeighborList
 from .geometry.placement import PlacementError, find_free_spot, place
+from .geometry.throats import observe, throat_rows, throats_of
 from .resolve import Model, resolve
 from .scene import Scene, SceneError
 from .version import __version__
@@ -58,6 +59,8 @@ class Result:
     summary: dict
     series: list = field(default_factory=list)      # (realization, t, escapees)
     flow: list = field(default_factory=list)        # (realization, t, pressure drop, Q)
+    # (realization, throat, x, y, width, passages, clogged, t_clog), with several throats
+    throats: list = field(default_factory=list)
     final: dict = field(default_factory=dict)       # numpy arrays (R, N, ...)
     notes: dict = field(default_factory=dict)       # what every "auto" chose, and why
 
@@ -147,6 +150,19 @@ class Simulation:
         self.series: list = []          # (realization, t, escapees) rows so far
         self.flow: list = []            # (realization, t, pressure drop, flow rate) per solve
         self.next_series = 0.0          # time of the next row
+        # Per throat (geometry/throats.py) and realization, from the checks:
+        # passages (centres that crossed its segment between two checks), the time
+        # of the latest one, the first check since then that found it blocked at
+        # rest (NaN: none), and t_clog (NaN: open; a passage reopens a clog)
+        self.throats = throats_of(m.geometry)
+        T = len(self.throats)
+        self.throat_passages = np.zeros((R, T), dtype=np.int64)
+        self.throat_last_passage_t = np.zeros((R, T))
+        self.throat_static_t = np.full((R, T), np.nan)
+        self.throat_t_clog = np.full((R, T), np.nan)
+        # the positions and alive flags the latest check (or set_state) left
+        self.check_x = np.zeros((R, N, 2))
+        self.check_alive = np.zeros((R, N), dtype=bool)
         self.any_running = True
         self.interrupted = False
         if place_particles:
@@ -199,6 +215,8 @@ class Simulation:
         self._to_device(b.alive, 1 if alive is None else alive, (R, N), np.int32)
         # bodies set dead here did not escape
         self.unfed_by_species = self._dead_by_species(b.alive.to_numpy())
+        self.check_x = np.array(np.broadcast_to(x, (R, N, 2)), dtype=float)
+        self.check_alive = b.alive.to_numpy().astype(bool)
         self.history.clear()
         self.rebuild_neighbors()
         if self.fluid is not None:
@@ -394,6 +412,8 @@ class Simulation:
                 running[r] = 0
                 changed = True
                 continue
+            if len(self.throats) and not final:
+                self._check_throats(st, r)
             if res.clogged or final:
                 continue            # stop_at_clog = false: the stream goes on, the result is kept
             went = escaped[r] > self.escaped_np[r]
@@ -423,6 +443,7 @@ class Simulation:
             if sc.feed.mode == "count":
                 self._feed(running, st)
             self.unfed_by_species = self._dead_by_species(st["alive"])
+            self.check_x, self.check_alive = st["x"], st["alive"]
         return bool(running.any())
 
     def kinetic_energy(self) -> np.ndarray:
@@ -449,12 +470,34 @@ class Simulation:
         near = a & (xs[:, 0] > g.constriction_x0 - m.d_max) & (xs[:, 0] < g.constriction_x1 + m.d_max)
         if not near.any():
             return False
-        speed = np.linalg.norm(st["v"][r][near], axis=1).max()
-        if self.u_ref is not None:
-            ref = self.u_ref[r]
-        else:
-            ref = m.d_min / self.scene.clog.window
-        return speed < self.scene.clog.speed_fraction * ref
+        return np.linalg.norm(st["v"][r][near], axis=1).max() < self._rest_speed(r)
+
+    def _rest_speed(self, r) -> float:
+        """Below this speed a particle at a constriction is at rest (docs/scene.md,
+        [clog]): clog.speed_fraction of the mean fluid speed there, or without
+        fluid of d / clog.window."""
+        ref = (self.u_ref[r] if self.u_ref is not None
+               else self.model.d_min / self.scene.clog.window)
+        return self.scene.clog.speed_fraction * ref
+
+    def _check_throats(self, st, r):
+        """Passages and clogs of every throat of realization ``r`` at a check
+        (:func:`~taichi_hsdem.geometry.throats.observe`): a throat blocked at rest
+        with nothing through it for clog.window has clogged, since it was first
+        found so after its latest passage."""
+        passed, static = observe(self.throats, self.check_x[r], self.check_alive[r],
+                                 st["x"][r], st["v"][r], st["alive"][r],
+                                 self._rest_speed(r), self.model.d_max)
+        went = passed > 0
+        self.throat_passages[r] += passed
+        self.throat_last_passage_t[r, went] = self.t
+        self.throat_static_t[r, went] = np.nan
+        self.throat_t_clog[r, went] = np.nan
+        first = static & np.isnan(self.throat_static_t[r])
+        self.throat_static_t[r, first] = self.t
+        clog = (static & np.isnan(self.throat_t_clog[r])
+                & (self.t - self.throat_last_passage_t[r] >= self.scene.clog.window))
+        self.throat_t_clog[r, clog] = self.throat_static_t[r, clog]
 
     def _feed(self, running, st):
         """Re-insert escaped particles at the inlet (feed.mode = "count") of the
@@ -639,4 +682,5 @@ class Simulation:
                 for r in range(self.R)],
         }
         return Result(scene=sc, summary=summary, series=series, flow=list(self.flow),
-                      final=st, notes=dict(self.model.notes))
+                      throats=throat_rows(self.throats, self.throat_passages,
+                                          self.throat_t_clog), final=st, notes=dict(self.model.notes))

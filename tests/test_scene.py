@@ -422,7 +422,7 @@ def test_unknown_keys_suggest_the_closest(tmp_path):
      "geometry.angle: must be in (0, 90], got 95.0"),
     ("geometry.angle", 30, "geometry.angle: not used by kind 'hourglass'"),
     ("geometry.kind", "funnel", "geometry.kind: must be one of 'hourglass', "
-                                "'converging', 'polygon', got \"funnel\""),
+                                "'converging', 'polygon', 'micromodel', got \"funnel\""),
     ("geometry.escape_offset", -1, "geometry.escape_offset: must be >= 0, got -1.0"),
     ("particles.0", {"shape": "circle", "diameter": 1.0, "density": 1.0,
                      "packing_fraction": 0.6}, "particles[0].packing_fraction: must be in "

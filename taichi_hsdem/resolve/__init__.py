@@ -30,8 +30,8 @@ from ..scene import Scene, SceneError
 from ..scene.keys import AUTO
 from .domain import (_bounding_box, _check_feed, _check_fit, _check_steps, _fluid_grid,
                      _geometry, _initial_poses, _memory_parts, _resolve_intervals,
-                     _resolve_solver, _resolve_stepping, _wall_grid_part, open_channel_speed,
-                     resolve_particle_flux)
+                     _resolve_solver, _resolve_stepping, _wall_grid_part, micromodel_values,
+                     open_channel_speed, resolve_particle_flux)
 from .model import (FLUID_CELLS_PER_D, MIN_FLUID_CELLS_ACROSS_CONSTRICTION,
                     MIN_FLUID_CELLS_PER_DIAMETER, MIN_WALL_CELLS_PER_DIAMETER, NODE_BYTES,
                     SKIN_FRACTION, UPDATE_CELL_FRACTION, Model, Species, _Resolution, _size_keys)
@@ -103,6 +103,9 @@ def _resolve(scene: Scene, arch: str) -> Model:
         geom = _geometry(g)
     except ValueError as exc:
         raise SceneError([f"{src}: geometry: {exc}"]) from None
+    if g.kind == "micromodel":
+        values, res.notes["geometry.kind"] = micromodel_values(g, geom)
+        res.values.update(values)
     if geom.constriction_width < d_min:
         res.notes["geometry"] = (f"the constriction ({geom.constriction_width:g}) is narrower "
                                  f"than the smallest particle ({d_min:g}): nothing can pass")

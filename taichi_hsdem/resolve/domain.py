@@ -11,6 +11,7 @@ from ..layout import DISK_HISTORY_SLOTS, LS_HISTORY_SLOTS
 from ..fluid import PressureSolver
 from ..limits import usable_cpus
 from ..geometry import walls as wl
+from ..geometry.micromodel import MICROMODEL_KEYS, array_of, channel_size
 from ..geometry.placement import check_initial
 from ..limits import Part
 from ..scene import Scene, SceneError
@@ -21,6 +22,11 @@ from .model import (CHECK_INTERVAL, CHECK_TRAVEL, F32_ONLY_ARCHS, FLUID_CELLS_PE
 
 
 def _geometry(g) -> wl.Geometry:
+    if g.kind == "micromodel":
+        # escape is measured from the array's downstream end, so that every
+        # throat sees the particles that reach it
+        m = array_of(g)
+        return wl.from_polygon(m.outline, m.obstacles, constriction_x=m.x_exit)
     if g.kind == "hourglass":
         return wl.hourglass(g.length, g.width, g.neck_width, neck_x=g.neck_x,
                             taper_length=g.taper_length)
@@ -35,6 +41,24 @@ def _geometry(g) -> wl.Geometry:
 
 
 
+def micromodel_values(g, geom: wl.Geometry) -> tuple[dict, str]:
+    """The resolved-scene values that replace a micromodel's pillar keys by the
+    polygons generated from them (kind = "polygon", its outline, obstacles and
+    constriction_x), and the note saying so."""
+    values = {"geometry.kind": "polygon",
+              "geometry.outline": [[float(x), float(y)] for x, y in geom.outline],
+              "geometry.obstacles": [[[float(x), float(y)] for x, y in o]
+                                     for o in geom.obstacles],
+              "geometry.constriction_x": float(geom.constriction_x0)}
+    values.update({f"geometry.{k}": None for k in MICROMODEL_KEYS})
+    keys = ", ".join(f"{k} = {getattr(g, k)!r}" for k in MICROMODEL_KEYS
+                     if getattr(g, k) is not None)
+    note = (f'polygon: the micromodel ({keys}) as the {len(geom.obstacles)} pillar polygons '
+            "it generates; constriction_x is the array's downstream end, where escape is "
+            "measured from")
+    return values, note
+
+
 def _bounding_box(g) -> tuple[float, float, float, float]:
     """(x_min, x_max, y_min, y_max) of the geometry a scene asks for, from its keys
     alone (before the outline is built)."""
@@ -45,6 +69,10 @@ def _bounding_box(g) -> tuple[float, float, float, float]:
             (g.width_in - g.constriction_width) / 2 / math.tan(math.radians(g.angle))
         half = max(g.width_in, g.width_out) / 2
         return 0.0, g.length_in + taper + g.constriction_length + g.length_out, -half, half
+    if g.kind == "micromodel":
+        length, width = channel_size(g.rows, g.columns, g.pillar_diameter, g.pillar_spacing,
+                                     g.inlet_length, g.outlet_length)
+        return 0.0, length, -width / 2, width / 2
     pts = np.asarray(g.outline, dtype=float)
     return (float(pts[:, 0].min()), float(pts[:, 0].max()), float(pts[:, 1].min()),
             float(pts[:, 1].max()))

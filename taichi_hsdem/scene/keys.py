@@ -181,6 +181,7 @@ class FluidConfig(Config):
 
 
 _HOURGLASS, _CONVERGING, _POLYGON = ("hourglass",), ("converging",), ("polygon",)
+_MICROMODEL = ("micromodel",)
 
 
 @document
@@ -189,7 +190,7 @@ class GeometryConfig(Config):
     """``[geometry]``: the fluid region; keys of the other kinds are ``None``."""
 
     kind: str = keyfield("choice", "the outline generator", required=True,
-                        choices=("hourglass", "converging", "polygon"))
+                        choices=("hourglass", "converging", "polygon", "micromodel"))
     wall_cell_size: float | str = keyfield("float", 'wall level-set spacing, m; "auto": '
                                           "smallest d_eq / 10", AUTO, auto=True, gt=0)
     escape_offset: float | None = keyfield("float", "escape line distance downstream of "
@@ -232,6 +233,46 @@ class GeometryConfig(Config):
     constriction_x: float | None = keyfield("float", "where escape is measured from, m "
                                            "(None: x of the narrowest section, resolved "
                                            "by the run)", only=_POLYGON)
+    # kind = "micromodel" (geometry/micromodel.py; resolved into kind = "polygon")
+    pillar_array: str | None = keyfield("choice", "how the pillars are laid out: a square "
+                                       "lattice, staggered columns, or at random", "square",
+                                       choices=("square", "staggered", "random"),
+                                       only=_MICROMODEL)
+    pillar_shape: str | None = keyfield("choice", "circle: a polygon of pillar_sides "
+                                       "standing for the circle of pillar_diameter; "
+                                       "polygon: the regular polygon of pillar_sides around "
+                                       "that circle (its inscribed one; 4: a square of side "
+                                       "pillar_diameter)",
+                                       "circle", choices=("circle", "polygon"),
+                                       only=_MICROMODEL)
+    rows: int | None = keyfield("int", "pillars per column (staggered: every other column "
+                               "holds rows - 1)", required=True, ge=1, only=_MICROMODEL)
+    columns: int | None = keyfield("int", "pillar columns (random: rows x columns pillars "
+                                  "in their box)", required=True, ge=1, only=_MICROMODEL)
+    pillar_diameter: float | None = keyfield("float", "pillar diameter (random: the mean), "
+                                            "m", required=True, gt=0, only=_MICROMODEL)
+    pillar_spacing: float | None = keyfield("float", "centre-to-centre distance of the "
+                                           "pillars, m, > pillar_diameter", required=True,
+                                           gt=0, only=_MICROMODEL)
+    pillar_sides: int = keyfield("int", "vertices of each pillar's polygon (circle: 8 or "
+                                "more; a gap is within 2 r tan^2(pi / (2 sides)) of the "
+                                "circles')", 24, ge=3, only=_MICROMODEL)
+    diameter_spread: float = keyfield("float", "random arrays: standard deviation of the "
+                                     "pillar diameters, a fraction of their mean (cut at 2 "
+                                     "sigma)",
+                                     0.0, ge=0, lt=0.5, only=_MICROMODEL)
+    min_throat: float | None = keyfield("float", "smallest gap between two pillars or a "
+                                       "pillar and a wall, m (random: kept, default "
+                                       "(pillar_spacing - pillar_diameter) / 2; square, "
+                                       "staggered: checked)", gt=0, only=_MICROMODEL)
+    inlet_length: float | None = keyfield("float", "pillar-free channel before the array "
+                                         "(where particles are fed), m", required=True,
+                                         gt=0, only=_MICROMODEL)
+    outlet_length: float | None = keyfield("float", "pillar-free channel after the array "
+                                          "(where the escape line lies), m", required=True,
+                                          gt=0, only=_MICROMODEL)
+    pillar_seed: int = keyfield("int", "seed of a random array (the same seed, the same "
+                               "array in every realization)", 0, ge=0, only=_MICROMODEL)
 
 
 _ROUND, _SQUARE, _RECT, _REGULAR = (("circle", "regular_polygon"), ("square",),

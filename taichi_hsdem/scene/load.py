@@ -39,9 +39,11 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from ..geometry.micromodel import CIRCLE_MIN_SIDES, MICROMODEL_KEYS, PillarError, array_of
 from ..geometry.polygon import (cross, first_crossing, points_in_polygon, segments_intersect,
                                 signed_area)
 from .coerce import (
+    BAD,
     MISSING,
     Problems,
     describe,
@@ -226,6 +228,35 @@ def _check_geometry(v: dict, out: Problems) -> None:
                     "a slit in a wall of no thickness")
     elif kind == "polygon":
         _check_polygon_outline(v, out)
+    elif kind == "micromodel":
+        _check_micromodel(v, out)
+
+
+def _check_micromodel(v: dict, out: Problems) -> None:
+    """The pillar array must fit its vertex budget and be buildable (the generator
+    is cheap, so it is run here and its refusal reported on the key it names)."""
+    given = [v[k] for k in MICROMODEL_KEYS if k != "min_throat"]   # min_throat may be None
+    if not good(*given) or v["min_throat"] is BAD:
+        return
+    if v["pillar_shape"] == "circle" and v["pillar_sides"] < CIRCLE_MIN_SIDES:
+        out.add("geometry.pillar_sides", f"{v['pillar_sides']} sides are too few to stand "
+                f"for a circle (at least {CIRCLE_MIN_SIDES}); or set pillar_shape = "
+                '"polygon"')
+        return
+    if v["diameter_spread"] > 0 and v["pillar_array"] != "random":
+        out.add("geometry.diameter_spread", f"applies to pillar_array = \"random\" only "
+                f"(the {v['pillar_array']} array's pillars are all pillar_diameter)")
+        return
+    total = 4 + v["rows"] * v["columns"] * v["pillar_sides"]
+    if total > MAX_OUTLINE_VERTICES:
+        out.add("geometry.pillar_sides", f"{v['rows']} x {v['columns']} pillars of "
+                f"{v['pillar_sides']} sides have {total} vertices, more than the "
+                f"{MAX_OUTLINE_VERTICES} a run can afford; use fewer sides or pillars")
+        return
+    try:
+        array_of(v)
+    except PillarError as exc:
+        out.add("geometry." + exc.key, exc.problem)
 
 
 def _check_polygon_outline(v: dict, out: Problems) -> None:
