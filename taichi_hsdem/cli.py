@@ -26,6 +26,7 @@ from pathlib import Path
 from . import checkpoint, output
 from .exits import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, Parser
 from .scene import SceneError, load_scene
+from .scene.load import path_length_problem
 from .scene.toml import parse_toml
 
 # Keys a resumed run may change: its end and what it writes.
@@ -149,9 +150,9 @@ def _overrides(args) -> list[str]:
 def output_folder_problem(out: Path, key: str) -> str | None:
     """Why results cannot be written to folder ``out`` (``key`` names where it came
     from: ``--out`` or ``FILE: output.dir``), or None. Creates nothing."""
-    too_long = [part for part in out.parts if len(os.fsencode(part)) > 255]
+    too_long = path_length_problem(out)
     if too_long:
-        return f"{key}: the folder name {too_long[0][:40]}... is longer than 255 bytes"
+        return f"{key}: {too_long}"
     try:
         if os.path.islink(out) and not out.exists():
             return (f"{key}: {out} is a link to {os.readlink(out)}, which does not exist "

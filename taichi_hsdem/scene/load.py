@@ -141,6 +141,16 @@ class Scene(Config):
 MAX_NAME_BYTES = 255
 MAX_PATH_BYTES = 4095
 
+
+def path_length_problem(path) -> str | None:
+    """Why no file system takes folder ``path`` (a name or the whole path too long
+    in bytes), or None."""
+    parts = [part.encode("utf-8", "surrogatepass") for part in Path(path).parts]
+    if any(len(part) > MAX_NAME_BYTES for part in parts) or sum(map(len, parts)) > MAX_PATH_BYTES:
+        return (f"a folder name longer than {MAX_NAME_BYTES} bytes, or a path longer than "
+                f"{MAX_PATH_BYTES}: no file system takes it")
+    return None
+
 _TOP_ORDER = ("name", "description", "units", "run", "fluid", "geometry", "particles",
               "contact", "damping", "feed", "clog", "output")
 
@@ -355,11 +365,8 @@ def _check_scene(scene: dict, species: dict[int, dict], shapes: dict[int, Any],
         output["dir"] = f"runs/{name}"
     if good(output["dir"]) and (not output["dir"].strip() or "\0" in output["dir"]):
         out.add("output.dir", f"must be a folder path, got {show(output['dir'])}")
-    elif good(output["dir"]):
-        parts = [p.encode("utf-8", "surrogatepass") for p in Path(output["dir"]).parts]
-        if any(len(p) > MAX_NAME_BYTES for p in parts) or sum(map(len, parts)) > MAX_PATH_BYTES:
-            out.add("output.dir", f"a folder name longer than {MAX_NAME_BYTES} bytes, or a "
-                                  f"path longer than {MAX_PATH_BYTES}: no file system takes it")
+    elif good(output["dir"]) and path_length_problem(output["dir"]):
+        out.add("output.dir", path_length_problem(output["dir"]))
     if good(run["t_end"]):
         if clog["window"] is None:
             clog["window"] = 0.1 * run["t_end"]
