@@ -6,12 +6,20 @@
 * :func:`kozeny_carman`: a fluid cell covered by a particle.
 * :func:`harmonic_mean`: how two cells' permeabilities (or two species'
   stiffnesses) combine at a face (in series).
+* :func:`sphere_in_gap`: how a sphere at mid-gap drifts with, and disturbs, the
+  depth-averaged flow (3D Stokes, ``taichi_hsdem/data/sphere_in_gap.csv``);
+  :func:`carried_fraction`, :func:`inclusion_dipole` and :func:`drift_damping`:
+  the Darcy disk that reproduces both (docs/model.md section 3.4).
 """
 from __future__ import annotations
 
 import math
+from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
+
+SPHERE_IN_GAP = Path(__file__).with_name("data") / "sphere_in_gap.csv"
 
 
 def restitution_factor(e: float) -> float:
@@ -123,3 +131,109 @@ def theory_escapees(phi, t, flow_rate, gap, diameter):
     """Escapees of a steady stream, ``4 phi Q t / (H pi d^2)`` (docs/model.md sec. 4)."""
     return 4.0 * np.asarray(phi, dtype=float) * flow_rate * np.asarray(t, dtype=float) / (
         gap * math.pi * diameter ** 2)
+
+
+@lru_cache(maxsize=1)
+def _sphere_table() -> np.ndarray:
+    """``(d/H, drift ratio, free dipole)`` rows of :data:`SPHERE_IN_GAP`, by d/H."""
+    import csv
+    with open(SPHERE_IN_GAP, newline="") as fh:
+        rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+    table = np.array([[float(r[k]) for k in ("d_over_H", "drift_ratio", "dipole_free")]
+                      for r in rows])
+    return table[np.argsort(table[:, 0])]
+
+
+def sphere_in_gap_range() -> tuple[float, float]:
+    """The d/H range :func:`sphere_in_gap` covers."""
+    t = _sphere_table()
+    return float(t[0, 0]), float(t[-1, 0])
+
+
+def sphere_in_gap(d_over_h: float) -> tuple[float, float]:
+    """How a rigid sphere of diameter ``d`` centred between plates ``H`` apart
+    moves with a pressure-driven flow: ``(drift_ratio, dipole)``.
+
+    ``drift_ratio`` is the force- and torque-free sphere's speed over the mean
+    (depth-averaged) fluid speed ``u``; ``dipole`` is ``B / a^2`` of the
+    depth-averaged pressure it then leaves, ``p' = -B G x / r^2`` (``a = d/2``,
+    ``G`` the driving gradient, ``x`` along the flow). Interpolated (piecewise
+    cubic, monotone) in the 3D Stokes table :data:`SPHERE_IN_GAP`, computed by
+    ``python tools/stokes_sphere_gap.py --table`` (docs/validation.md).
+
+    Raises
+    ------
+    ValueError
+        Outside the table's range of d/H.
+
+    Examples
+    --------
+    >>> lam, b = sphere_in_gap(0.875)
+    >>> round(lam, 3), round(b, 3)
+    (1.009, 0.464)
+    """
+    from scipy.interpolate import PchipInterpolator
+    t = _sphere_table()
+    lo, hi = t[0, 0], t[-1, 0]
+    if not lo <= d_over_h <= hi:
+        raise ValueError(f"d/H = {d_over_h:.4g} is outside the 3D Stokes table of a "
+                         f"sphere at mid-gap ({lo:g} to {hi:g})")
+    drift = PchipInterpolator(t[:, 0], t[:, 1])(d_over_h)
+    dipole = PchipInterpolator(t[:, 0], t[:, 2])(d_over_h)
+    return float(drift), float(dipole)
+
+
+def carried_fraction(kappa_free, kappa_p, drift_ratio, dipole):
+    """The share ``c`` of its velocity that a disk's cells must carry for a lone
+    disk drifting at ``drift_ratio`` times the mean fluid speed to leave the
+    dipole ``B / a^2 = dipole`` (docs/model.md section 3.4).
+
+    A disk of permeability ``kappa_p`` in a background ``kappa_free`` whose cells
+    carry the flux ``c v`` leaves ``B / a^2 = ((k1 - k2) - c lambda k1) / (k1 + k2)``
+    (:func:`inclusion_dipole`); this inverts it.
+
+    Examples
+    --------
+    >>> round(carried_fraction(1.0, 0.0, 1.0, 0.0), 12)   # a tracer: no dipole
+    1.0
+    >>> round(carried_fraction(1.0, 0.0, 1.0, 1.0), 12)   # an impermeable obstacle
+    0.0
+    """
+    return ((kappa_free - kappa_p) - dipole * (kappa_free + kappa_p)) / (drift_ratio * kappa_free)
+
+
+def inclusion_dipole(kappa_free, kappa_p, drift_ratio, carried):
+    """``B / a^2`` of a lone disk drifting at ``drift_ratio`` times the mean
+    fluid speed whose cells carry ``carried`` times its velocity: the circular
+    inclusion (docs/model.md section 6) with a source, ``p = -G x (1 + B/r^2)``
+    outside, continuous pressure and normal flux at the rim.
+
+    Examples
+    --------
+    >>> inclusion_dipole(1.0, 0.0, 1.0, 0.0), inclusion_dipole(1.0, 0.0, 1.0, 1.0)
+    (1.0, 0.0)
+    """
+    return ((kappa_free - kappa_p) - carried * drift_ratio * kappa_free) / (kappa_free + kappa_p)
+
+
+def drift_damping(viscosity, density, kappa_free, kappa_p, drift_ratio, carried=None):
+    """Global damping ``xi`` at which a lone particle (a prism of thickness ``H``,
+    density ``rho``) drifts at ``drift_ratio`` times the mean fluid speed
+    ``u = kappa_free G / eta`` (docs/model.md section 5.2).
+
+    The pressure force on the disk is ``A H G (1 + B/a^2)``
+    (:func:`inclusion_dipole`): with its cells carrying ``c v``
+    (``carried = c``), ``xi = (2 - c lambda) eta / (rho lambda (k1 + k2))``; held
+    fixed in the pressure solve (``carried = None``), ``xi = (1 + beta) eta /
+    (rho lambda k1)``, ``beta = (k1 - k2) / (k1 + k2)``.
+
+    Examples
+    --------
+    >>> drift_damping(1.0, 1.0, 1.0, 0.0, 1.0, carried=1.0)   # tracer: eta / (rho k1)
+    1.0
+    """
+    if carried is None:
+        beta = (kappa_free - kappa_p) / (kappa_free + kappa_p)
+        return (1.0 + beta) * viscosity / (density * drift_ratio * kappa_free)
+    return (2.0 - carried * drift_ratio) * viscosity / (density * drift_ratio
+                                                       * (kappa_free + kappa_p))

@@ -157,8 +157,8 @@ def _interval_shares(y):
 @ti.kernel
 def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), sp: ti.types.ndarray(),
                mass: ti.types.ndarray(), inertia: ti.types.ndarray(), xi: ti.types.ndarray(),
-               terms: _DRIFT, interval: ti.f64, gap: ti.f64, ox: ti.f64, oy: ti.f64,
-               h: ti.f64):
+               carried: ti.types.ndarray(), terms: _DRIFT, interval: ti.f64, gap: ti.f64,
+               ox: ti.f64, oy: ti.f64, h: ti.f64):
     """fluid.gmg.BodyTerms of every body but ``owner``: its mean velocity over the
     next fluid interval if the force it felt over the last one were held,
     ``drift = alpha v0 + g T F / m``, and how that changes with the pressure
@@ -168,7 +168,9 @@ def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), sp: ti.ty
     velocity and whether it was in play then), ``F T = m (dv + xi dx)``; for a
     body without that history (just placed or re-inserted), the pressure force
     ``f`` of the last pressure at its present pose and the external load. Then
-    ``past`` is set to now."""
+    ``past`` is set to now. Both terms are scaled by the species' carried
+    fraction: the solve's source is the flux the body's cells carry, ``c`` times
+    its velocity (docs/model.md section 3.4)."""
     for r, i in ti.ndrange(bodies.v.shape[0], bodies.v.shape[1]):
         for q in ti.static(range(3)):
             terms.mobility[r, i, q] = 0.0
@@ -198,9 +200,10 @@ def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), sp: ti.ty
                                   ti.cast(bodies.tau_fluid[r, i] + bodies.tau_ext[r, i],
                                           ti.f64)], dt=ti.f64)
                 impulse = load * interval / inert
+            c = ti.cast(carried[sp[i]], ti.f64)
             for q in ti.static(range(3)):
-                terms.mobility[r, i, q] = gap * g * interval / inert[q]
-                terms.drift[r, i, q] = alpha * vel[q] + g * impulse[q]
+                terms.mobility[r, i, q] = c * (gap * g * interval / inert[q])
+                terms.drift[r, i, q] = c * (alpha * vel[q] + g * impulse[q])
         for q in ti.static(range(3)):
             terms.past[r, i, q] = now[q]
             terms.past[r, i, 3 + q] = vel[q]
@@ -350,7 +353,8 @@ class FluidCoupling:
             self._drift = _DRIFT(past=self.past, centre=self.terms.centre,
                                  mobility=self.terms.mobility, drift=self.terms.drift)
         body_drift(b.pack(), batch.running, particles.species, particles.mass,
-                   particles.inertia, materials.xi, self._drift, self.interval, self.gap,
+                   particles.inertia, materials.xi, materials.carry, self._drift,
+                   self.interval, self.gap,
                    *self.grid)
         return self.terms
 
@@ -359,7 +363,8 @@ class FluidCoupling:
         half-and-half with the one used at the previous solve. The pressure lags the
         particles by a whole update interval while they relax to their drift within
         1/xi; with the raw velocity the lagged loop v -> 2u - v alternates, the
-        half-and-half average lands an isolated particle on u in one solve."""
+        half-and-half average lands an isolated particle on u in one solve. The
+        cells carry the species' share of it."""
         v = bodies.v.to_numpy().astype(float)
         w = bodies.omega.to_numpy().astype(float)
         if self.solves == 0:
@@ -367,8 +372,11 @@ class FluidCoupling:
         else:
             self.v_src = 0.5 * (self.v_src + v)
             self.w_src = 0.5 * (self.w_src + w)
-        self.vs.from_numpy(self.v_src.astype(backend.numpy_real()))
-        self.ws.from_numpy(self.w_src.astype(backend.numpy_real()))
+        # the cells carry the species' share of it (docs/model.md section 3.4)
+        m = self.model
+        c = np.array([s.carried for s in m.species])[m.species_of_particle]
+        self.vs.from_numpy((self.v_src * c[None, :, None]).astype(backend.numpy_real()))
+        self.ws.from_numpy((self.w_src * c[None, :]).astype(backend.numpy_real()))
 
     def update(self, bodies, batch, particles, templates, materials, force: bool = False):
         """Re-rasterise the permeability and, unless it changed too little

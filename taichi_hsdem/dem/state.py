@@ -217,18 +217,21 @@ class Particles(Bundle):
 class Materials(Bundle):
     """``pair`` (S, S, N_PAIR) and ``wall`` (S, N_PAIR): kn, ks, mu, c_e
     (``layout.PAIR_*``); ``xi`` (S,) global damping; ``kappa`` (S,) permeability
-    inside a particle of the species."""
+    inside a particle of the species; ``carry`` (S,) the share of its velocity a
+    particle's cells carry in the pressure solve."""
     pair: Array
     wall: Array
     xi: Array
     kappa: Array
+    carry: Array
 
     @classmethod
     def of(cls, model) -> "Materials":
         sp = model.species
         return cls(pair=array(pair_table(sp)), wall=array(wall_table(sp)),
                    xi=array(np.array([s.xi for s in sp])),
-                   kappa=array(np.array([s.kappa for s in sp])))
+                   kappa=array(np.array([s.kappa for s in sp])),
+                   carry=array(np.array([s.carried for s in sp])))
 
 
 @bundle

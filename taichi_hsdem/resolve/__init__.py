@@ -35,7 +35,7 @@ from .domain import (_bounding_box, _check_feed, _check_fit, _check_steps, _flui
 from .model import (FLUID_CELLS_PER_D, MIN_FLUID_CELLS_ACROSS_CONSTRICTION,
                     MIN_FLUID_CELLS_PER_DIAMETER, MIN_WALL_CELLS_PER_DIAMETER, NODE_BYTES,
                     SKIN_FRACTION, UPDATE_CELL_FRACTION, Model, Species, _Resolution, _size_keys)
-from .particles import (_auto_nodes, _check_nodes, _damping, _ls_spacing, _stiffness,
+from .particles import (_auto_nodes, _check_nodes, _drift, _ls_spacing, _stiffness,
                         auto_node_spacing, critical_time_step, node_gap, node_sagitta,
                         pair_table, species_shape, wall_table)
 
@@ -187,11 +187,11 @@ def _resolve(scene: Scene, arch: str) -> Model:
                               lambda: mass * t.inertia_per_mass,
                               f"{key}.density, {_size_keys(k, sp)}, fluid.gap", "kg m^2")
         ls = _ls_spacing(res, k, sp, t, widths[k], all_disks)
-        xi = _damping(res, scene, sp, kp, kappa_free, k)
+        xi, carried = _drift(res, scene, sp, t, kp, kappa_free, k)
         species.append(Species(name=sp.name, shape=t, count=count, density=sp.density,
                                mass=mass, inertia=inertia, d_eq=t.equivalent_diameter, kn=0.0,
                                ks=0.0, friction=sp.friction, restitution=sp.restitution,
-                               xi=xi, kappa=kp, ls_spacing=ls))
+                               xi=xi, kappa=kp, carried=carried, ls_spacing=ls))
     # "auto" depends on each species' density and permeability: record every
     # species' value, and as damping.xi their count-weighted mean (then unused).
     for k, s in enumerate(species):

@@ -70,6 +70,7 @@ class Species:
     restitution: float
     xi: float
     kappa: float          # Kozeny-Carman permeability inside the particle (0 without fluid)
+    carried: float        # share of its velocity its cells carry in the pressure solve
     ls_spacing: float | None
 
 

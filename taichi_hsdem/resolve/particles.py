@@ -11,6 +11,7 @@ from .. import limits
 from ..geometry import distance as dist
 from ..geometry import shapes as shp
 from ..geometry import walls as wl
+from .. import laws as lgs
 from ..laws import harmonic_mean, restitution_factor
 from ..layout import N_PAIR, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
 from ..limits import Part
@@ -212,28 +213,82 @@ def _ls_spacing(res: _Resolution, k: int, sp, t: shp.Shape, w: float,
     return ls
 
 
-def _damping(res: _Resolution, scene: Scene, sp, kp: float, kappa_free: float, k: int) -> float:
-    """Global damping of species ``k`` (``damping.xi = "auto"``: the plate drag)."""
+def _drift(res: _Resolution, scene: Scene, sp, t: shp.Shape, kp: float, kappa_free: float,
+           k: int) -> tuple[float, float]:
+    """``(xi, carried)`` of species ``k``: its global damping (``damping.xi =
+    "auto"``: the plate drag at which a lone particle drifts at ``drift_ratio``
+    times the mean fluid speed) and the share of its velocity its cells carry in
+    the pressure solve (1 where it is not used; docs/model.md sections 3.4, 5.2)."""
     f = scene.fluid
-    if sp.xi is not None:
-        return float(sp.xi)
-    if scene.damping.xi != "auto":
-        return float(scene.damping.xi)
-    keys = f"particles[{k}].density, fluid.viscosity, fluid.gap"
-    if f.enabled and f.particle_flux:
-        res.notes["damping.xi"] = ("eta / (rho (H^2/12 + kappa_p)): an isolated particle "
-                                   "carried by the flow drifts at the mean fluid velocity")
-        return res.derived(f"damping of particles[{k}]",
-                           lambda: f.viscosity / (sp.density * (kappa_free + kp)), keys, "1/s")
-    if f.enabled:
-        res.notes["damping.xi"] = ("(1 + beta) eta / (rho H^2/12): an isolated particle held "
-                                   "in the pressure solve drifts at the mean fluid velocity")
-        beta = (kappa_free - kp) / (kappa_free + kp)
-        return res.derived(f"damping of particles[{k}]",
-                           lambda: (1.0 + beta) * f.viscosity / (sp.density * kappa_free),
-                           keys, "1/s")
-    res.notes["damping.xi"] = "no fluid: no plate drag"
-    return 0.0
+    key = f"particles[{k}]"
+    given = sp.xi if sp.xi is not None else (None if scene.damping.xi == "auto"
+                                              else scene.damping.xi)
+    if not f.enabled:
+        res.notes["damping.xi"] = "no fluid: no plate drag"
+        return (0.0 if given is None else float(given)), 1.0
+    carries = bool(f.particle_flux)
+    uses = {"drift_ratio": given is None, "carried_fraction": carries}
+    table = what = None
+    tracer = False
+    if any(uses[name] and getattr(sp, name) == AUTO for name in uses):
+        ratio = t.equivalent_diameter / f.gap
+        lo, hi = lgs.sphere_in_gap_range()
+        if lo <= ratio <= hi:
+            table = lgs.sphere_in_gap(ratio)
+            what = (("a sphere" if t.kind == "circle" else "a sphere of the same d_eq (the "
+                     "table is for spheres)") + f" at mid-gap, d/H = {ratio:.4g} (3D Stokes)")
+        else:
+            # no sphere of this size fits the table (or the gap): the tracer of the
+            # depth-averaged flow, which moves at its speed and leaves no dipole
+            tracer = True
+            what = (f"the tracer of the depth-averaged flow (d_eq/H = {ratio:.3g} is outside "
+                    f"the 3D Stokes table of a sphere at mid-gap, {lo:g} to {hi:g})")
+    values = {}
+    for name, why in (("drift_ratio", "the free speed of"),
+                      ("carried_fraction", "the share at which a lone drifting particle "
+                                           "leaves the depth-averaged dipole of")):
+        value = getattr(sp, name)
+        if not uses[name]:
+            res.note(f"particles.{k}.{name}", value, "not used: " + (
+                "the damping is given" if name == "drift_ratio" else
+                "fluid.particle_flux = false holds the particles fixed in each pressure solve"))
+        elif value == AUTO and tracer:
+            values[name] = 1.0
+            res.note(f"particles.{k}.{name}", 1.0, what)
+        elif value == AUTO:
+            values[name] = (table[0] if name == "drift_ratio" else
+                            lgs.carried_fraction(kappa_free, kp,
+                                                 values.get("drift_ratio", table[0]),
+                                                 table[1]))
+            res.note(f"particles.{k}.{name}", values[name], f"{why} {what}"
+                     + (f" (B/a^2 = {table[1]:.4g})" if name == "carried_fraction" else ""))
+        else:
+            values[name] = float(value)
+            res.values[f"particles.{k}.{name}"] = values[name]
+    carried = values.get("carried_fraction")
+    if carried is not None and not 0.0 <= carried <= 2.0:
+        # only "auto" can get here (a given value is range-checked with the scene)
+        res.bad(f"{key}.carried_fraction", f'"auto" gives {carried:.3g}, outside [0, 2]: the '
+                f"sphere's dipole ({table[1]:.3g}) is beyond what a disk of this "
+                f"permeability can leave; give carried_fraction")
+    if given is not None:
+        return float(given), 1.0 if carried is None else carried
+    drift = values["drift_ratio"]
+    if carries:
+        res.notes["damping.xi"] = ("(2 - c lambda) eta / (rho lambda (H^2/12 + kappa_p)): a "
+                                   "lone particle whose cells carry c (carried_fraction) of "
+                                   "its velocity drifts at lambda (drift_ratio) times the mean "
+                                   "fluid velocity")
+    else:
+        res.notes["damping.xi"] = ("(1 + beta) eta / (rho lambda H^2/12): a lone particle "
+                                   "held in the pressure solve drifts at lambda (drift_ratio) "
+                                   "times the mean fluid velocity")
+    keys = (f"{key}.density, {key}.drift_ratio, fluid.viscosity, fluid.gap"
+            + (f", {key}.carried_fraction" if carries else ""))
+    xi = res.derived(f"damping of particles[{k}]",
+                     lambda: lgs.drift_damping(f.viscosity, sp.density, kappa_free, kp, drift,
+                                               carried), keys, "1/s")
+    return xi, 1.0 if carried is None else carried
 
 
 def _driving_pressure(scene: Scene, geom: wl.Geometry, species: list[Species]) -> tuple[float, str]:

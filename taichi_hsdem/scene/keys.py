@@ -331,6 +331,18 @@ class SpeciesConfig(Config):
     xi: float | None = keyfield("float", "global damping of this species, 1/s; unset: "
                                "damping.xi (the resolved scene records each species' value)",
                                None, ge=0)
+    drift_ratio: float | str = keyfield(
+           "float", "speed of a lone particle of this species carried by the flow over the "
+           "mean (depth-averaged) fluid speed, dimensionless; sets damping.xi = \"auto\" "
+           "(the plate drag); \"auto\": a sphere of diameter d_eq at mid-gap (3D Stokes, "
+           "taichi_hsdem/data/sphere_in_gap.csv)", AUTO, auto=True, gt=0, le=2)
+    carried_fraction: float | str = keyfield(
+           "float", "share of a moving particle's velocity that its cells carry in the "
+           "pressure solve (fluid.particle_flux = true), dimensionless: 1 a tracer of the "
+           "depth-averaged flow (no disturbance when it drifts at the fluid's speed), 0 a "
+           "moving obstacle; \"auto\": the share at which a lone drifting particle leaves "
+           "the depth-averaged pressure dipole of a sphere of diameter d_eq at mid-gap "
+           "(3D Stokes)", AUTO, auto=True, ge=0, le=2)
 
     def area(self) -> float:
         """Area of the shape, m^2."""
