@@ -3,8 +3,9 @@
 The method, in the order of the package: scene (:mod:`.scene`) -> shapes and walls
 (:mod:`.geometry`) -> resolved set-up (:mod:`.resolve`) -> contact, fluid coupling
 and integration in Taichi (:mod:`.dem`) with the pressure solve (:mod:`.fluid`) ->
-the run and its observables (:mod:`.simulation`) -> statistics (:mod:`.stats`) ->
-output and rendering (:mod:`.output`, :mod:`.render`, :mod:`.paraview`).
+the run (:mod:`.simulation`) and its observables (:mod:`.observables`, into a
+:mod:`.runstate`) -> statistics (:mod:`.stats`) -> output and rendering
+(:mod:`.output`, :mod:`.render`, :mod:`.paraview`).
 
 Examples
 --------

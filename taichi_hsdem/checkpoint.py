@@ -1,9 +1,11 @@
 """Checkpoints: everything the next step of a batch needs, in one ``.npz`` file.
 
 A checkpoint holds the Taichi arrays (bodies, per-realization status, shear
-history, neighbour lists, fluid fields), the pressure solver's state
-(:meth:`~taichi_hsdem.fluid.PressureSolver.state`), the host's bookkeeping (time,
-steps, results so far, the time series, the feeders' random-number states) and,
+history, neighbour lists, fluid fields), the fluid coupling's host state
+(:meth:`~taichi_hsdem.dem.coupling.FluidCoupling.host_state`) and the pressure
+solver's (:meth:`~taichi_hsdem.fluid.PressureSolver.state`), the run state whole
+(:class:`~taichi_hsdem.runstate.RunState`: time, steps, results so far, the
+observables' records, the time series, the feeders' random-number states) and,
 as text, the resolved scene and the digest of the code that wrote it. Arrays are
 stored as they are (no pickle); the rest is one JSON header. Floats survive
 exactly (``repr`` round-trips in JSON).
@@ -21,6 +23,7 @@ Examples
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -33,25 +36,19 @@ import numpy as np
 
 from . import backend
 from .digest import code_digest
+from .runstate import ARRAY_FIELDS, RealizationResult, RunState
 from .scene import SceneError, load_scene, scene_to_toml
 from .scene.toml import parse_toml, tomllib
 
 FILE = "checkpoint.npz"
 FORMAT = 1
-# simulation.RealizationResult's fields and the statuses it takes (not imported:
-# the command line reads checkpoints before it loads Taichi).
-RESULT_KEYS = ("seed", "escapees", "clogged", "t_clog", "status", "reason", "t_stop")
+# runstate.RealizationResult's fields and the statuses it takes.
+RESULT_KEYS = tuple(f.name for f in dataclasses.fields(RealizationResult))
 RESULT_STATUSES = ("ok", "unstable")
-# The host's per-realization bookkeeping arrays: checkpoint name -> Simulation attribute.
-HOST_ARRAYS = {"host.last_escape_t": "last_escape_t", "host.escaped": "escaped_np",
-               "host.arch_static_t": "arch_static_t",
-               "host.escaped_by_species": "escaped_by_species",
-               "host.unfed_by_species": "unfed_by_species",
-               "host.throat_passages": "throat_passages",
-               "host.throat_last_passage_t": "throat_last_passage_t",
-               "host.throat_static_t": "throat_static_t",
-               "host.throat_t_clog": "throat_t_clog",
-               "host.check_x": "check_x", "host.check_alive": "check_alive"}
+# The run state's arrays (runstate.ARRAY_FIELDS) are stored as host.<field>; its
+# other fields in the header's host record, beside the neighbour lists' and the
+# fluid coupling's counters.
+HOST = "host."
 
 
 class CheckpointError(ValueError):
@@ -76,41 +73,29 @@ def _device_arrays(sim) -> dict:
         arrays["fused.done"] = sim.done
         arrays["fused.builds"] = sim.builds
     if sim.fluid is not None:
-        fl = sim.fluid
-        arrays.update({f"fluid.{k}": getattr(fl, k) for k in (
-            "kappa", "carried", "pres", "vs", "ws")})
+        arrays.update({f"fluid.{k}": a for k, a in sim.fluid.device_arrays().items()})
     return arrays
+
+
+def _host_arrays(sim) -> dict:
+    """The run state's arrays, by their names in the checkpoint."""
+    return {HOST + name: value for name, value in sim.run_state.to_arrays()[1].items()}
 
 
 def save(sim, path) -> Path:
     """Write ``sim``'s state to ``path`` (atomically); returns the path."""
     path = Path(path)
     arrays = {name: a.to_numpy() for name, a in _device_arrays(sim).items()}
-    host = {
-        "t": sim.t, "steps": sim.steps, "seeds": sim.seeds,
-        "rngs": [rng.bit_generator.state for rng in sim.rngs],
-        "results": [vars(r) for r in sim.results],
-        "series": [[int(r), float(t), int(s)] for r, t, s in sim.series],
-        "flow": [[int(r), float(t), float(dp), float(q)] for r, t, dp, q in sim.flow],
-        "next_series": sim.next_series, "any_running": sim.any_running,
-        "history_overflows": sim.history_overflows, "launches": sim.launches,
-        "neighbor_caps": [sim.neighbors.cell_cap, sim.neighbors.nbr_cap],
-        "neighbor_builds": sim.neighbors.builds,
-        "e0": None if sim.e0 is None else [float(v) for v in sim.e0],
-        "u_ref": None if sim.u_ref is None else [float(v) for v in sim.u_ref],
-    }
-    arrays.update({name: getattr(sim, attr) for name, attr in HOST_ARRAYS.items()})
+    host, state_arrays = sim.run_state.to_arrays()
+    host.update({"neighbor_caps": list(sim.neighbors.capacities),
+                 "neighbor_builds": sim.neighbors.builds})
+    arrays.update({HOST + name: value for name, value in state_arrays.items()})
     if sim.fluid is not None:
         fl = sim.fluid
-        arrays["fluid.pressure"] = fl.pressure
-        arrays["fluid.v_src"] = fl.v_src
-        arrays["fluid.w_src"] = fl.w_src
-        if fl.past is not None:
-            arrays["fluid.past"] = fl.past.to_numpy()
-        if fl._kappa_solved is not None:
-            arrays["fluid.kappa_solved"] = fl._kappa_solved
+        counters, fluid_arrays = fl.host_state()
+        arrays.update({f"fluid.{k}": v for k, v in fluid_arrays.items()})
         arrays.update({f"solver.{k}": v for k, v in fl.solver.state().items()})
-        host["fluid"] = {"updates": fl.updates, "solves": fl.solves, "seconds": fl.seconds}
+        host["fluid"] = counters
     header = {"format": FORMAT, "code": code_digest(), "precision": sim.scene.run.precision,
               "scene": scene_to_toml(sim.scene), "source": sim.scene.source, "host": host}
     arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
@@ -303,43 +288,23 @@ def restore(sim, path) -> dict:
     arrays = _read_arrays(sim, path, host)
     if sim.fluid is not None and not isinstance(host.get("fluid"), dict):
         raise CheckpointError(f"{path}: host.fluid: missing, though the scene has a fluid")
+    run_state = RunState.from_arrays(host, {name: arrays[HOST + name]
+                                            for name in ARRAY_FIELDS})
     nl = sim.neighbors
-    nl.cell_cap, nl.nbr_cap = host["neighbor_caps"]
-    nl._alloc_cells()
-    nl._alloc_nbr()
+    nl.resize(*host["neighbor_caps"])
     npr = backend.numpy_real()
     for name, array in _device_arrays(sim).items():
         value = arrays[name]
         floating = np.issubdtype(value.dtype, np.floating)
         array.from_numpy(value.astype(npr if floating else value.dtype))
-    for name, attr in HOST_ARRAYS.items():
-        setattr(sim, attr, arrays[name])
+    nl.builds = int(host["neighbor_builds"])
     if sim.fluid is not None:
         fl = sim.fluid
-        fl.pressure = arrays["fluid.pressure"]
-        fl.v_src = arrays["fluid.v_src"]
-        fl.w_src = arrays["fluid.w_src"]
-        if fl.past is not None:
-            fl.past.from_numpy(arrays["fluid.past"].astype(np.float64))
-        fl._kappa_solved = arrays.get("fluid.kappa_solved")
+        fl.restore_host_state(host["fluid"], {k[len("fluid."):]: v for k, v in arrays.items()
+                                              if k in _FLUID_HOST})
         fl.solver.restore({k[len("solver."):]: v for k, v in arrays.items()
                            if k.startswith("solver.")})
-        fl.updates, fl.solves, fl.seconds = (host["fluid"][k] for k in
-                                             ("updates", "solves", "seconds"))
-    sim.t, sim.steps = float(host["t"]), int(host["steps"])
-    for rng, state in zip(sim.rngs, host["rngs"]):
-        rng.bit_generator.state = state
-    for res, saved in zip(sim.results, host["results"]):
-        vars(res).update(saved)
-    sim.series = [(int(r), float(t), int(s)) for r, t, s in host["series"]]
-    sim.flow = [(int(r), float(t), float(dp), float(q)) for r, t, dp, q in host["flow"]]
-    sim.next_series = float(host["next_series"])
-    sim.any_running = bool(host["any_running"])
-    sim.history_overflows = int(host["history_overflows"])
-    sim.launches = int(host["launches"])
-    nl.builds = int(host["neighbor_builds"])
-    sim.e0 = None if host["e0"] is None else np.array(host["e0"])
-    sim.u_ref = None if host["u_ref"] is None else np.array(host["u_ref"])
+    sim.run_state = run_state
     return header
 
 
@@ -347,9 +312,10 @@ def _check_progress(host, sim, path) -> None:
     """The time and step count agree with each other and with the scene: ``t`` is
     ``steps`` time steps and no later than ``run.t_end``; the seeds are the scene's."""
     t, steps, dt, t_end = host["t"], host["steps"], sim.dt, sim.scene.run.t_end
-    if host["seeds"] != list(sim.seeds):
+    seeds = list(sim.run_state.seeds)
+    if host["seeds"] != seeds:
         raise CheckpointError(f"{path}: host.seeds: {host['seeds']} are not the scene's "
-                              f"{list(sim.seeds)}")
+                              f"{seeds}")
     # t is dt summed steps times: its round-off stays far below a part in 1e6.
     if abs(t - steps * dt) > 1e-6 * steps * dt + 0.5 * dt:
         raise CheckpointError(f"{path}: host.t = {t!r} s is not host.steps = {steps} steps "
@@ -360,12 +326,14 @@ def _check_progress(host, sim, path) -> None:
     # The neighbour capacities only grow by doubling from the first ones while a
     # rebuild overflows, and never past what N bodies can fill.
     caps = host["neighbor_caps"]
-    nl = sim.neighbors
-    if any(c > max(2 * sim.N, 16, nl.cell_cap, nl.nbr_cap) for c in caps):
+    if any(c > max(2 * sim.N, 16, *sim.neighbors.capacities) for c in caps):
         raise CheckpointError(f"{path}: host.neighbor_caps: {caps} exceed what "
                               f"{sim.N} bodies can fill")
 
 
+#: The fluid coupling's host arrays (FluidCoupling.host_state), by checkpoint name.
+_FLUID_HOST = {"fluid.pressure", "fluid.v_src", "fluid.w_src", "fluid.past",
+               "fluid.kappa_solved"}
 #: Host arrays where NaN means "none yet" (no static arch, no clog).
 _NAN_IS_NONE = {"host.arch_static_t", "host.throat_static_t", "host.throat_t_clog"}
 # Arrays whose values must be finite in every realization that has not gone
@@ -385,13 +353,13 @@ def _read_arrays(sim, path, host) -> dict:
     expected = {name: a.to_numpy() for name, a in _device_arrays(sim).items()}
     for name, cap in (("neighbors.cell_p", cell_cap), ("neighbors.nbr", nbr_cap)):
         expected[name] = np.zeros(expected[name].shape[:-1] + (cap,), expected[name].dtype)
-    expected.update({name: getattr(sim, attr) for name, attr in HOST_ARRAYS.items()})
+    expected.update(_host_arrays(sim))
     if sim.fluid is not None:
         fl = sim.fluid
+        _, fluid_arrays = fl.host_state()
+        fluid_arrays.pop("kappa_solved", None)        # optional, below
+        expected.update({f"fluid.{k}": v for k, v in fluid_arrays.items()})
         expected["fluid.pressure"] = np.zeros((R, *sim.model.fluid_shape))
-        expected["fluid.v_src"], expected["fluid.w_src"] = fl.v_src, fl.w_src
-        if fl.past is not None:
-            expected["fluid.past"] = fl.past.to_numpy()
         expected.update({f"solver.{k}": v for k, v in fl.solver.state().items()})
     optional = {"fluid.kappa_solved": expected.get("fluid.kappa")}
     arrays = {}

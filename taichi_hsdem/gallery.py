@@ -88,7 +88,7 @@ def head_on(e, fast_path=True, dt_safety=0.02, nodes=40, precision="f64"):
                                  "nodes": nodes}], restitution=e, fast_path=fast_path,
                                dt_safety=dt_safety, precision=precision))
     sim.set_state([[[8.0, 5.0], [10.0, 5.0]]], v=[[[1.0, 0.0], [-1.0, 0.0]]])
-    sim.step(int(1.2 / sim.dt))          # approach (0.5), contact, separation
+    sim.advance(int(1.2 / sim.dt))          # approach (0.5), contact, separation
     v = sim.state()["v"][0]
     return HeadOn((v[1, 0] - v[0, 0]) / 2.0, v, sim.dt)
 

@@ -52,14 +52,14 @@ def settle(species, poses, g, friction=0.0):
     load = np.array([s.mass for s in sim.model.species])[sim.particles.species_np][:, None] \
         * np.asarray(g, dtype=float)[None]
     sim.set_external_load(force=[load])
-    sim.step(int(T_SETTLE / sim.dt))
+    sim.advance(int(T_SETTLE / sim.dt))
     f, tau = sim.forces()
     return sim, f[0], tau[0], load
 
 
 def assert_at_rest_in_balance(sim, f, tau, load):
     sim.batch.max_overlap.fill(0)              # the overlap at rest, not the landing's
-    sim.step(10)
+    sim.advance(10)
     f, tau = (a[0] for a in sim.forces())
     st = sim.state()
     assert sim.batch.bad.to_numpy()[0] & BAD_PASSED == 0
@@ -283,12 +283,12 @@ def test_fast_body_driven_through_a_thin_one_is_caught():
     sq = {"shape": "square", "side": 0.5, "count": 1}
     sim = make_sim(arena_scene([bar, sq], dt_safety=0.1))
     sim.set_state([[[10.0, 5.0], [10.0, 3.0]]], v=[[[0.0, 0.0], [0.0, 60.0]]])
-    sim.step(int(0.06 / sim.dt))
+    sim.advance(int(0.06 / sim.dt))
     assert sim.batch.bad.to_numpy()[0] & BAD_PASSED
     # the same bar met slowly holds the square off
     sim.set_state([[[10.0, 5.0], [10.0, 4.6]]], v=[[[0.0, 0.0], [0.0, 1.0]]])
     sim.batch.bad.fill(0)
-    sim.step(int(0.3 / sim.dt))
+    sim.advance(int(0.3 / sim.dt))
     assert sim.batch.bad.to_numpy()[0] == 0
     assert sim.state()["x"][0, 1, 1] < 5.0 - 0.05 - 0.25 + 0.01
 

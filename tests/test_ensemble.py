@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichi_hsdem import Simulation, load_scene
+from taichi_hsdem import Simulation, load_scene, observables
 
 HOURGLASS = Path(__file__).resolve().parents[1] / "scenes" / "hourglass24.toml"
 SEED = 1
@@ -144,11 +144,14 @@ def test_t_clog_is_the_first_static_arch_after_the_last_escape():
     assert row["clogged"] and row["escapees"] > 0
     counts = [0] + [n for _, n, _ in checks]
     last = max(i for i in range(len(checks)) if counts[i + 1] > counts[i])
-    static = [i for i in range(last + 1, len(checks)) if sim._arch_static(checks[i][2], 0)]
+    def static_at(st):
+        return observables.arch_static(sim.model, sim.run_state.u_ref, st, 0)
+
+    static = [i for i in range(last + 1, len(checks)) if static_at(checks[i][2])]
     assert row["t_clog"] == checks[static[0]][0] > checks[last][0]
     assert row["t_last_escape"] == checks[last][0]
     declared = next(t for t, _, st in checks[static[0]:] if t - checks[last][0] >= 0.1
-                    and sim._arch_static(st, 0))
+                    and static_at(st))
     assert row["t_clog"] <= declared
 
 

@@ -29,13 +29,13 @@ def run(stepping, extra=(), shrink=False):
     sim = Simulation(load_scene(HOURGLASS, SHORT + [f"run.stepping={stepping}", *extra]),
                      neighbor_capacities=caps)
     sim.initial_caps = (sim.neighbors.cell_cap, sim.neighbors.nbr_cap)
-    step = sim.step
-    sim.calls = {"step": 0}
+    advance = sim.advance
+    sim.calls = {"advance": 0}
 
-    def counted_step(n=1):
-        sim.calls["step"] += 1
-        step(n)
-    sim.step = counted_step
+    def counted_advance(n=1):
+        sim.calls["advance"] += 1
+        advance(n)
+    sim.advance = counted_advance
     res = sim.run()
     return sim, res
 
@@ -76,7 +76,7 @@ def test_overflowing_rebuilds_catch_up(per_step):
     dropped, so the result is still the per-step one."""
     sim, res = run("fused", shrink=True)
     assert (sim.neighbors.cell_cap, sim.neighbors.nbr_cap) != sim.initial_caps   # grown in the run
-    assert sim.launches > sim.calls["step"]                             # and caught up
+    assert sim.run_state.launches > sim.calls["advance"]                # and caught up
     _same((sim, res), per_step)
 
 
@@ -94,3 +94,15 @@ def test_fused_refused_where_it_does_not_apply():
     sim = Simulation(load_scene(SCENES / "squares.toml", ["run.t_end=0.01"]))
     assert not sim.fused and sim.scene.run.stepping == "per_step"
     assert "not all disks" in sim.model.notes["run.stepping"]
+
+
+def test_step_is_a_deprecated_name_of_advance():
+    """``sim.step(n)`` (its old name) warns and takes the DEM steps ``advance(n)``
+    takes: no checks, no series rows."""
+    old, new = (Simulation(load_scene(HOURGLASS, SHORT)) for _ in range(2))
+    with pytest.warns(DeprecationWarning, match="advance"):
+        old.step(30)
+    new.advance(30)
+    assert old.steps == new.steps == 30 and old.t == new.t
+    np.testing.assert_array_equal(old.state()["x"], new.state()["x"])
+    assert old.run_state.series == new.run_state.series == []

@@ -183,7 +183,7 @@ def test_jammed_cluster_comes_to_rest_under_the_fixed_obstacle_pressure():
     x = st["x"][0]
     neck = sim.model.geometry.constriction_x0
     assert x[:, 0].max() < neck and x[:, 0].max() > neck - 0.6   # one disk in the neck
-    assert np.abs(st["v"][0]).max() < 1e-9 * sim.u_ref[0]
+    assert np.abs(st["v"][0]).max() < 1e-9 * sim.run_state.u_ref[0]
     m, fl = sim.model, sim.scene.fluid
     fixed = TaichiPressureSolver(m.fluid_active, m.fluid_dx, m.fluid_dx, fl.viscosity, m.bc(),
                                  tol=1e-12, gap=fl.gap)

@@ -43,7 +43,7 @@ def oblique(fast_path, nodes=40, e=1.0, mu=0.0):
                                fast_path=fast_path, dt_safety=0.02))
     # offset by 0.4 diameters: an oblique hit
     sim.set_state([[[8.0, 5.0], [10.0, 5.4]]], v=[[[1.0, 0.0], [-1.0, 0.0]]])
-    sim.step(int(1.2 / sim.dt))
+    sim.advance(int(1.2 / sim.dt))
     st = sim.state()
     return st["v"][0], st["omega"][0], st["x"][0]
 
@@ -91,7 +91,7 @@ def test_damped_free_particle_decays_exponentially():
     sim = make_sim(arena_scene([dict(DISK, count=1)], xi=xi, dt_safety=0.05))
     sim.set_state([[[5.0, 5.0]]], v=[[[1.0, 0.5]]], omega=[[3.0]])
     n = int(1.0 / sim.dt)
-    sim.step(n)
+    sim.advance(n)
     t = n * sim.dt
     st = sim.state()
     bound = 10 * n * (xi * sim.dt) ** 3 / 12 + 1e-12
@@ -113,7 +113,7 @@ def test_energy_conserved_without_dissipation():
     v = rng.normal(size=(12, 2))
     sim.set_state(xs[None], v=v[None])
     ke0 = sim.kinetic_energy()[0]
-    sim.step(int(8.0 / sim.dt))
+    sim.advance(int(8.0 / sim.dt))
     st = sim.state()
     ke1 = sim.kinetic_energy()[0]
     assert st["alive"].all()
@@ -156,11 +156,11 @@ def resting_square(tangential_fraction, mu=0.3, nodes=40, normalize=True, load=1
                                kn=1e4, normalize=normalize, xi=xi, dt_safety=0.1))
     sim.set_state([[[10.0, 0.5]]])
     sim.set_external_load(force=[[[0.0, -load]]])
-    sim.step(int(1.0 / sim.dt))                  # settle under the normal load
+    sim.advance(int(1.0 / sim.dt))                  # settle under the normal load
     x_settled = sim.state()["x"][0, 0].copy()
     sim.set_external_load(force=[[[tangential_fraction * mu * load, -load]]])
     t = 1.0
-    sim.step(int(t / sim.dt))
+    sim.advance(int(t / sim.dt))
     return sim, x_settled, sim.state()
 
 
@@ -197,7 +197,7 @@ def test_corner_to_face_contact_repels_both_ways(corner_first):
     if not corner_first:
         poses.reverse()
     sim.set_state([[p[:2] for p in poses]], theta=[[p[2] for p in poses]])
-    sim.step(1)
+    sim.advance(1)
     f, _ = sim.forces()
     k_corner = 0 if corner_first else 1
     assert f[0, k_corner, 0] < 0 < f[0, 1 - k_corner, 0]
@@ -247,7 +247,7 @@ def test_level_set_disk_pair_force_is_the_node_law_on_the_exact_distance(normali
         c = np.array([10.0, 5.0])
         u = np.array([math.cos(a), math.sin(a)])
         sim.set_state([[c, c + (1.0 - depth) * u]], theta=[[0.0, turn]])
-        sim.step(1)
+        sim.advance(1)
         f, _ = sim.forces()
         ref, n_i, n_j = law(40, depth, a, normalize, turn=turn)
         counts.add((n_i, n_j))

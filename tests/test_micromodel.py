@@ -148,12 +148,12 @@ def test_clog_placed_by_hand_is_found_at_that_throat_only():
     xs = [[x - 0.9, y - 0.52], [x - 0.9, y + 0.52], [2.0, 0.0]]
     sim.set_state([xs])
     sim.run()
-    clogged = np.flatnonzero(np.isfinite(sim.throat_t_clog[0]))
+    clogged = np.flatnonzero(np.isfinite(sim.run_state.throat_t_clog[0]))
     assert clogged.tolist() == [k]
-    assert sim.throat_passages.sum() == 0
+    assert sim.run_state.throat_passages.sum() == 0
     # formed at the first check (nothing ever passed it), found after clog.window
-    assert sim.throat_t_clog[0, k] == pytest.approx(sim.check_every * sim.dt, rel=1e-9)
-    rows = [r for r in throat_rows(sim.throats, sim.throat_passages, sim.throat_t_clog)
+    assert sim.run_state.throat_t_clog[0, k] == pytest.approx(sim.check_every * sim.dt, rel=1e-9)
+    rows = [r for r in throat_rows(sim.throats, sim.run_state.throat_passages, sim.run_state.throat_t_clog)
             if r[6]]
     assert [(r[0], r[1]) for r in rows] == [(0, k)]
 
@@ -168,9 +168,9 @@ def test_a_disk_flying_along_a_row_of_gaps_passes_each_of_its_throats_once():
     # are parallel to the path and not crossed
     crossed = on_line & (np.abs(sim.throats.end[:, 1] - sim.throats.start[:, 1]) > 0.1)
     assert crossed.sum() == 4
-    assert sim.throat_passages[0, crossed].tolist() == [1, 1, 1, 1]
-    assert sim.throat_passages[0, ~crossed].sum() == 0
-    assert not np.isfinite(sim.throat_t_clog).any()
+    assert sim.run_state.throat_passages[0, crossed].tolist() == [1, 1, 1, 1]
+    assert sim.run_state.throat_passages[0, ~crossed].sum() == 0
+    assert not np.isfinite(sim.run_state.throat_t_clog).any()
 
 
 def test_a_disk_that_passes_the_last_throat_and_escapes_between_two_checks_is_counted():
@@ -182,7 +182,7 @@ def test_a_disk_that_passes_the_last_throat_and_escapes_between_two_checks_is_co
     sim.set_state([[[x0, sim.throats.midpoints[k, 1]]]], v=[[[speed, 0.0]]])
     sim.run()
     assert sim.results[0].escapees == 1
-    assert sim.throat_passages[0].tolist() == [int(j == k) for j in range(len(sim.throats))]
+    assert sim.run_state.throat_passages[0].tolist() == [int(j == k) for j in range(len(sim.throats))]
 
 
 def test_resumed_run_keeps_every_throats_passages_and_clog(tmp_path):
@@ -203,15 +203,16 @@ def test_resumed_run_keeps_every_throats_passages_and_clog(tmp_path):
     straight.run()
     first = started()
     first.run(stop=lambda: first.t > 0.16)
-    assert first.t < MICRO["clog"]["window"] and first.throat_passages.sum() == 1
-    assert not np.isfinite(first.throat_t_clog).any() and np.isfinite(first.throat_static_t).any()
+    assert first.t < MICRO["clog"]["window"] and first.run_state.throat_passages.sum() == 1
+    assert not np.isfinite(first.run_state.throat_t_clog).any() and np.isfinite(first.run_state.throat_static_t).any()
     saved = checkpoint.save(first, tmp_path / "checkpoint.npz")
     second = Simulation(first.scene, place_particles=False)
     checkpoint.restore(second, saved)
     second.run()
-    assert straight.throat_passages.sum() == 4 and np.isfinite(straight.throat_t_clog).sum() == 1
+    assert straight.run_state.throat_passages.sum() == 4 and np.isfinite(straight.run_state.throat_t_clog).sum() == 1
     for name in ("throat_passages", "throat_last_passage_t", "throat_t_clog"):
-        assert np.array_equal(getattr(second, name), getattr(straight, name), equal_nan=True)
+        assert np.array_equal(getattr(second.run_state, name),
+                              getattr(straight.run_state, name), equal_nan=True)
 
 
 def test_shipped_micromodel_writes_its_throats(tmp_path, capsys):

@@ -16,6 +16,7 @@ import pytest
 
 from taichi_hsdem import Simulation, checkpoint, load_scene
 from taichi_hsdem.cli import main
+from taichi_hsdem.runstate import ARRAY_FIELDS, FIELDS, RunState
 
 ROOT = Path(__file__).resolve().parents[1]
 VANI = ROOT / "scenes" / "vani_phi026.toml"
@@ -74,6 +75,69 @@ def test_resumed_run_is_the_run_never_stopped(path, sets, chunks, tmp_path):
     if path == VANI:
         assert sum(r["escapees"] or 0 for r in straight.summary["realizations"]) > 0
         assert straight.summary["fluid"]["solves"] > 5
+
+
+def _same_state(a, b):
+    """Two run states field by field (runstate.FIELDS): arrays of the same dtype and
+    bits, generators in the same state, the rest equal."""
+    for name in FIELDS:
+        x, y = getattr(a, name), getattr(b, name)
+        if name == "rngs":
+            assert [g.bit_generator.state for g in x] == [g.bit_generator.state for g in y]
+        elif isinstance(x, np.ndarray):
+            assert isinstance(y, np.ndarray) and x.dtype == y.dtype, name
+            np.testing.assert_array_equal(x, y, err_msg=name)
+        else:
+            assert type(x) is type(y) and x == y, name
+
+
+def test_run_state_round_trips_every_field():
+    """to_arrays covers every field of RunState, and from_arrays of its output,
+    through the JSON a checkpoint's header is, gives each back exactly."""
+    rng = np.random.default_rng(7)
+    rs = RunState.start([3, 4], n_particles=5, n_species=2, n_throats=3)
+    for gen in rs.rngs:
+        gen.random(3)                               # not the seeded state
+    rs.t, rs.steps, rs.next_series = 0.1 + 1e-17 * 3, 12345, 0.30000000000000004
+    rs.any_running, rs.history_overflows, rs.launches = False, 2, 17
+    rs.e0, rs.u_ref = rng.random(2), rng.random(2)
+    rs.results[1].escapees, rs.results[1].clogged, rs.results[1].t_clog = 9, True, 0.07
+    rs.results[0].status, rs.results[0].reason = "unstable", "why"
+    rs.series = [(0, 0.0, 0), (1, 0.1, 3)]
+    rs.flow = [(0, 0.05, 1.25, 1e-10), (1, 0.05, float("nan"), 2e-10)]
+    for name in ARRAY_FIELDS:
+        old = getattr(rs, name)
+        new = (rng.integers(0, 9, old.shape) if old.dtype.kind == "i" else
+               rng.random(old.shape) > 0.5 if old.dtype == bool else rng.random(old.shape))
+        setattr(rs, name, new.astype(old.dtype))
+    rs.throat_t_clog[0, 1] = np.nan
+    values, arrays = rs.to_arrays()
+    assert set(values) | set(arrays) == set(FIELDS) and not set(values) & set(arrays)
+    again = RunState.from_arrays(json.loads(json.dumps(values)), arrays)
+    assert again.flow[1][2] != again.flow[1][2]         # NaN stays NaN
+    again.flow[1] = rs.flow[1]
+    _same_state(rs, again)
+
+
+def test_checkpoint_restores_the_run_state_whole(tmp_path):
+    """Stopped in a run with escapes, re-feeding and pressure solves: the restored
+    Simulation holds the saved run state, every field, and the neighbour lists'
+    and the fluid coupling's own state."""
+    sets = COMMON + NEAR + ["run.t_end=0.3"]
+    first = Simulation(load_scene(VANI, sets))
+    first.run(stop=lambda: first.t > 0.25)
+    rs = first.run_state
+    assert rs.escaped.sum() > 0 and rs.series and rs.flow and rs.u_ref is not None
+    saved = checkpoint.save(first, tmp_path / "checkpoint.npz")
+    second = Simulation(load_scene(VANI, sets), place_particles=False)
+    checkpoint.restore(second, saved)
+    _same_state(first.run_state, second.run_state)
+    assert second.neighbors.capacities == first.neighbors.capacities
+    assert second.neighbors.builds == first.neighbors.builds
+    (ca, a), (cb, b) = first.fluid.host_state(), second.fluid.host_state()
+    assert ca == cb and set(a) == set(b)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
 
 
 def test_extended_run_is_the_longer_run(tmp_path):
@@ -271,7 +335,7 @@ def test_result_fields_are_the_simulations(finished):
     # the checkpoint checks each result record's keys without importing the simulator
     import dataclasses
 
-    from taichi_hsdem.simulation import RealizationResult
+    from taichi_hsdem.runstate import RealizationResult
     assert checkpoint.RESULT_KEYS == tuple(f.name for f in dataclasses.fields(RealizationResult))
     results = _header(_arrays(finished))["host"]["results"]
     assert [tuple(r) for r in results] == [checkpoint.RESULT_KEYS]

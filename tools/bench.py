@@ -134,7 +134,7 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
     sim = Simulation(load_scene(scene_path, ov))
     if sim.fluid is not None:
         sim.update_fluid(force=True)  # run()'s first solve (it sets the update interval)
-    sim.step(5)                      # compile every kernel before timing
+    sim.advance(5)                      # compile every kernel before timing
     solves0, fluid_s0 = (sim.fluid.solves, sim.fluid.seconds) if sim.fluid else (0, 0.0)
     steps0 = sim.steps
     samples = []                     # (simulated time, resident MB): flat over the run?

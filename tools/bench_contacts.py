@@ -14,14 +14,14 @@ square lattice (random small angles) with small random velocities through
 few warm-up steps, runs ``--settle-time`` simulated seconds (untimed) so that the
 lattice mixes into a gas with collisions under way, chooses K from a short probe
 so that K steps take at least ``--min-time`` seconds, and times
-``Simulation.step(K)`` ``--repeats`` times, each repeat starting again from the
+``Simulation.advance(K)`` ``--repeats`` times, each repeat starting again from the
 settled state (same trajectory, same work; ``set_state`` clears the shear
 history, which is rebuilt within a contact's first step).
 
 Reported per case (medians over the repeats):
 
 ``steps_per_s``, ``s_per_step``
-    wall time of ``Simulation.step`` (one step = loading the forces, contacts,
+    wall time of ``Simulation.advance`` (one step = loading the forces, contacts,
     integration, the host's read of the rebuild flag, and the neighbour rebuilds
     that the motion triggers), ``ti.sync()`` included.
 ``node_evals_per_s``
@@ -51,7 +51,7 @@ slower than the CPU backend and unable to compile f64 ``cos`` (every level-set
 case fails in f64); those are not GPU numbers.
 
 ``--profile`` adds, for each case, the time per step of each kernel that
-``Simulation.step`` launches, each call followed by ``ti.sync()`` (the kernels are
+``Simulation.advance`` launches, each call followed by ``ti.sync()`` (the kernels are
 wrapped, ``step`` itself runs unchanged; serialised, the parts add up to a little
 more than a step), and ``other``: the host's rebuild-flag read and Python loop.
 
@@ -290,11 +290,11 @@ def _sync():
 
 
 def timed_steps(sim, k: int, cpu: list | None = None) -> float:
-    """Wall time of ``sim.step(k)``; appends this process's CPU time to ``cpu``."""
+    """Wall time of ``sim.advance(k)``; appends this process's CPU time to ``cpu``."""
     _sync()
     c0 = time.process_time()
     t0 = time.perf_counter()
-    sim.step(k)
+    sim.advance(k)
     _sync()
     t = time.perf_counter() - t0
     if cpu is not None:
@@ -328,7 +328,7 @@ def run_case(case: str, n: int, args, log) -> dict:
     settle_steps = int(round(args.settle_time / sim.dt))
     t_settle = time.perf_counter()
     if settle_steps > 0:
-        sim.step(settle_steps)
+        sim.advance(settle_steps)
         st = sim.state()
         x0, th0, v0, w0 = st["x"], st["theta"], st["v"], st["omega"]
     t_settle = time.perf_counter() - t_settle
@@ -401,12 +401,12 @@ def run_case(case: str, n: int, args, log) -> dict:
 
 
 def profile_step(sim, reset, steps: int) -> dict:
-    """Time each kernel that ``Simulation.step`` launches, serialised.
+    """Time each kernel that ``Simulation.advance`` launches, serialised.
 
     Every Taichi kernel of the contact, coupling and integration modules and the
     neighbour rebuild are wrapped for the duration (module attributes, which
     ``step`` looks up at every call) so that each call is followed by
-    ``ti.sync()`` and timed; ``sim.step(steps)`` then runs as usual. ``other`` is
+    ``ti.sync()`` and timed; ``sim.advance(steps)`` then runs as usual. ``other`` is
     what remains of the step: the host's read of the rebuild flag and the Python
     loop (plus the wrappers' own small cost).
     """
@@ -438,7 +438,7 @@ def profile_step(sim, reset, steps: int) -> dict:
     try:
         ti.sync()
         t0 = clock()
-        sim.step(steps)
+        sim.advance(steps)
         ti.sync()
         total = clock() - t0
     finally:

@@ -182,11 +182,11 @@ def contact_study(out, quick):
                     c = np.array([10.0, 5.0])
                     u = np.array([np.cos(a), np.sin(a)])
                     sim.set_state([[c, c + (1.0 - depth) * u]])
-                    sim.step(1)
+                    sim.advance(1)
                     f, _ = sim.forces()
                     ratios.append(-f[0, 0] @ u / (kn * depth))
                 t0 = time.perf_counter()
-                sim.step(200)
+                sim.advance(200)
                 per_step = (time.perf_counter() - t0) / 200
                 ratios = np.array(ratios)
                 rows.append([normalize, nodes, h, float(np.mean(ratios)), float(np.std(ratios)),
@@ -287,7 +287,7 @@ def _press(sim, shapes, name, offset_angle, direction, depth):
             lo = mid
     xb = start + (lo + depth) * d
     sim.set_state([[xa, xb]], theta=[[0.0, theta]])
-    sim.step(1)
+    sim.advance(1)
     f, _ = sim.forces()
     return float(-f[0, 1] @ d), float(abs(f[0, 1, 0] * d[1] - f[0, 1, 1] * d[0]))
 
@@ -327,7 +327,7 @@ def concave_contact_study(out, quick):
                            for u in offsets]) / (kn * depth * d)
             forces[(f, c)] = fl[:, 0]
             t0 = time.perf_counter()
-            sim.step(100)
+            sim.advance(100)
             per_step = (time.perf_counter() - t0) / 100
             rows.append([name, f, c, sum(len(s.shape.nodes) for s in sim.model.species),
                          min(s.ls_spacing for s in sim.model.species), float(fl[:, 0].mean()),

@@ -341,6 +341,38 @@ class FluidCoupling:
         if self.past is not None:
             self.past.fill(0)
 
+    def device_arrays(self) -> dict:
+        """The Taichi arrays whose content the next update or step reads, by name
+        (what a checkpoint keeps of them)."""
+        return {"kappa": self.kappa, "carried": self.carried, "pres": self.pres,
+                "vs": self.vs, "ws": self.ws}
+
+    def host_state(self) -> tuple[dict, dict]:
+        """``(counters, arrays)``: what a checkpoint keeps of the coupling beside
+        :meth:`device_arrays` and the solver's own state: the update, solve and
+        solve-time counters, and the last pressure, the carried flux's source
+        velocities, the implicit coupling's motion since the last solve (``past``)
+        and the permeability of the last solve (``kappa_solved``, once solved)."""
+        counters = {"updates": self.updates, "solves": self.solves, "seconds": self.seconds}
+        arrays = {"pressure": self.pressure, "v_src": self.v_src, "w_src": self.w_src}
+        if self.past is not None:
+            arrays["past"] = self.past.to_numpy()
+        if self._kappa_solved is not None:
+            arrays["kappa_solved"] = self._kappa_solved
+        return counters, arrays
+
+    def restore_host_state(self, counters: dict, arrays: dict):
+        """Continue from :meth:`host_state` (checked by the caller); ``kappa_solved``
+        may be absent (no solve yet)."""
+        self.pressure = arrays["pressure"]
+        self.v_src = arrays["v_src"]
+        self.w_src = arrays["w_src"]
+        if self.past is not None:
+            self.past.from_numpy(arrays["past"].astype(np.float64))
+        self._kappa_solved = arrays.get("kappa_solved")
+        self.updates, self.solves, self.seconds = (counters[k] for k in
+                                                   ("updates", "solves", "seconds"))
+
     def _body_terms(self, bodies, batch, particles, templates, materials):
         """The bodies' terms of the implicit solve (fluid.gmg.BodyTerms) at the
         present poses and velocities, from their motion since the last solve."""

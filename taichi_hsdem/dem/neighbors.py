@@ -153,6 +153,18 @@ class NeighborList(Bundle):
         self.x_ref = ti.Vector.ndarray(2, backend.real(), shape=self.shape)
         self.builds = 0
 
+    @property
+    def capacities(self) -> tuple[int, int]:
+        """Bodies per cell and neighbours per body the lists hold now."""
+        return self.cell_cap, self.nbr_cap
+
+    def resize(self, cell_cap: int, nbr_cap: int):
+        """Allocate the cell and neighbour lists anew at these capacities (a
+        checkpoint's), empty: their contents are to be set or rebuilt."""
+        self.cell_cap, self.nbr_cap = int(cell_cap), int(nbr_cap)
+        self._alloc_cells()
+        self._alloc_nbr()
+
     def _alloc_cells(self):
         self.cell_p = ti.ndarray(ti.i32, shape=(self.shape[0], self.ncx * self.ncy, self.cell_cap))
 
