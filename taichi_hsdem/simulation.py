@@ -404,12 +404,6 @@ class Simulation:
         st = self.state()
         return np.array([self._kinetic_energy(st, r) for r in range(self.R)])
 
-    def _arch_static(self, st, r) -> bool:
-        """The clog's arch test for realization ``r`` in the state ``st``
-        (:func:`observables.arch_static`, which :meth:`_check` applies through
-        :func:`observables.count_escapes`); docs/model.md names it here."""
-        return observables.arch_static(self.model, self.run_state.u_ref, st, r)
-
     def _kinetic_energy(self, st, r):
         return observables.kinetic_energy(self.model, self.particles.species_np, st, r)
 

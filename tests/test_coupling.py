@@ -103,7 +103,7 @@ def lone_particle(species, cell, x, theta=0.0, width=WIDTH, sampling="bilinear")
     sim = make_sim(channel([dict(species, count=1)], cell=cell, width=width,
                            sampling=sampling))
     sim.set_state([[[x, width / 2]]], theta=[[theta]])
-    sim.step(1)
+    sim.advance(1)
     f, m = sim.forces()
     return sim, f[0, 0], m[0, 0]
 
@@ -282,7 +282,7 @@ def test_pressure_force_kernel_in_uniform_and_linear_fields():
     perims = np.array([s.shape.perimeter for s in sim.model.species])
     for grad, p0 in (((0.0, 0.0), 7.5), ((-0.8, 0.35), 3.0)):
         sim.fluid.pres.from_numpy((p0 + grad[0] * X + grad[1] * Y)[None])
-        sim.step(1)
+        sim.advance(1)
         f, m = sim.forces()
         expected = -GAP * areas[:, None] * np.array(grad)[None, :]
         # round-off of summing ~40 terms of size p * H * l

@@ -225,8 +225,13 @@ def test_particle_flux_auto_carries_the_volume_wherever_gmg_solves(arch, solver,
     note = model.notes["fluid.particle_flux"]
     assert note.startswith(f"{str(carried).lower()}:") and "auto:" in note
     assert ("keeps a clog stable" in note) == carried
-    # damping.xi = "auto": the carried particle's plate drag eta / (rho (H^2/12 + kp)),
-    # larger by (1 + beta) when it is held in the solve
+    # damping.xi = "auto" follows the choice: the drift of a particle whose cells
+    # carry carried_fraction of its velocity, or of one held in the solve
+    # (taichi_hsdem.laws.drift_damping; docs/model.md section 5.2)
+    from taichi_hsdem.laws import drift_damping
     sp = model.species[0]
-    xi_carried = fl.viscosity / (1.0 * (fl.gap ** 2 / 12.0 + sp.kappa))
-    assert (sp.xi == pytest.approx(xi_carried, rel=1e-12)) == carried
+    drift = model.scene.particles[0].drift_ratio
+    expected = drift_damping(fl.viscosity, 1.0, fl.gap ** 2 / 12.0, sp.kappa, drift,
+                             sp.carried if carried else None)
+    assert sp.xi == pytest.approx(expected, rel=1e-12)
+    assert (sp.carried != 1.0) == carried      # the share is used only when carried

@@ -13,8 +13,14 @@ its largest species, at every ``--wd``, with the same seeds at every point
 ``--set fluid.particle_flux=false``). The points run as one sweep
 (:func:`taichi_hsdem.studies.sweep.run_sweep`: resumable, one folder per point).
 Writes ``DIR/neck.csv`` and ``DIR/neck.md``: per W/d the mean escapees before a
-clog ``<s>`` with its 95 % interval (the summary's ``mean_escapees_ci``) and how
-many realizations never clogged. ``<s>`` should rise with W/d (every experiment).
+clog ``<s>`` with its 95 % interval (the summary's ``mean_escapees_ci``), how
+many realizations never clogged, and where the clogs held: how far upstream of
+the neck's entrance the most downstream particle near it sat when the run
+stopped, in particle diameters (median and quartiles over the clogged
+realizations; against a sudden contraction about 0.5; in a converging section an
+arch can hold further up, where the channel is wider than ``W``: at half-angle
+``a`` it is ``W + 2 x tan(a)`` wide there). ``<s>`` should rise with W/d (every
+experiment).
 
 Exit status: 0 every point has its results; 1 a point failed or went unstable;
 2 bad arguments or an invalid scene (one line each).
@@ -55,21 +61,57 @@ def _ratios(text: str) -> list[float]:
     return values
 
 
-def table(rows: list[dict], ratios: list[float]) -> tuple[str, str]:
-    """(CSV, markdown) of the points: W/d, <s>, its interval, never clogged / n."""
+def arch_positions(folder: pathlib.Path) -> list[float]:
+    """How far upstream of the neck's entrance, in diameters of the largest
+    species, the most downstream particle within 4 diameters of it (or in the
+    neck) sat, in every clogged realization of a finished point (its
+    ``summary.json`` and resolved scene)."""
+    import json
+
+    import numpy as np
+
+    from taichi_hsdem.resolve.domain import _geometry
+    from taichi_hsdem.scene import load_scene
+    summary = json.loads((folder / "summary.json").read_text())
+    scene = load_scene(folder / "scene.resolved.toml")
+    g = _geometry(scene.geometry)
+    d = max(sp.d_eq() for sp in scene.particles)
+    out = []
+    for res, fin in zip(summary["realizations"], summary.get("final_state") or []):
+        if not res.get("clogged"):
+            continue
+        x = np.asarray(fin["x"], dtype=float)[np.asarray(fin["alive"], dtype=bool)]
+        near = x[(x[:, 0] > g.constriction_x0 - 4 * d) & (x[:, 0] < g.constriction_x1 + d)]
+        if len(near):
+            out.append(float(g.constriction_x0 - near[:, 0].max()) / d)
+    return out
+
+
+def table(rows: list[dict], ratios: list[float],
+          where: list[list[float]] | None = None) -> tuple[str, str]:
+    """(CSV, markdown) of the points: W/d, <s>, its interval, never clogged / n,
+    and where the clogs held (``where``: :func:`arch_positions` of each point)."""
+    import numpy as np
+
     from taichi_hsdem.studies import fmt
-    csv = ["wd,mean_escapees,ci_lo,ci_hi,never_clogged,n,n_unstable,status"]
-    md = ["| W/d | `<s>` [95 %] | never clogged |", "|---|---|---|"]
-    for wd, row in zip(ratios, rows):
+    where = where or [[] for _ in ratios]
+    csv = ["wd,mean_escapees,ci_lo,ci_hi,never_clogged,n,n_unstable,status,"
+           "arch_upstream_median,arch_upstream_q1,arch_upstream_q3"]
+    md = ["| W/d | `<s>` [95 %] | never clogged | clogs held upstream of the neck (d) |",
+          "|---|---|---|---|"]
+    for wd, row, w in zip(ratios, rows, where):
         lo, hi = row["mean_escapees_ci"]
         never = row["n_ok"] - row["n_clogged"] if row["n"] else None
+        q = np.percentile(w, [50, 25, 75]) if w else [None] * 3
         csv.append(",".join("" if v is None else str(v) for v in (
             wd, row["mean_escapees"], lo, hi, never, row["n"], row["n_unstable"],
-            row["status"])))
+            row["status"], *q)))
         # no clog at all: the mean is unbounded, its lower limit is what was seen
         mean = (f"> {fmt(lo)}" if row["mean_escapees"] is None and lo is not None
                 else fmt(row["mean_escapees"]))
-        md.append(f"| {wd:g} | {mean} [{fmt(lo)}, {fmt(hi)}] | {never} of {row['n']} |")
+        held = f"{q[0]:.2f} ({q[1]:.2f}-{q[2]:.2f})" if w else "-"
+        md.append(f"| {wd:g} | {mean} [{fmt(lo)}, {fmt(hi)}] | {never} of {row['n']} "
+                  f"| {held} |")
     return "\n".join(csv) + "\n", "\n".join(md) + "\n"
 
 
@@ -112,7 +154,10 @@ def main(argv=None) -> int:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID
-    csv, md = table(rows, ratios)
+    from taichi_hsdem.studies.sweep import point_folder
+    where = [arch_positions(out / point_folder(p)) if (out / point_folder(p) / "summary.json")
+             .exists() else [] for p in points]
+    csv, md = table(rows, ratios, where)
     atomic_write(out / "neck.csv", csv)
     atomic_write(out / "neck.md", md)
     say(md)

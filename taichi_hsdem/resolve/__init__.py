@@ -125,12 +125,23 @@ def _resolve(scene: Scene, arch: str) -> Model:
                               "fluid.gap", "m^2") if f.enabled else 0.0)
     kps = []
     for k, (sp, t) in enumerate(zip(scene.particles, templates)):
-        if f.enabled:
+        if f.enabled and sp.permeability != "auto":
+            kps.append(res.derived(f"permeability inside particles[{k}]",
+                                   lambda: float(sp.permeability),
+                                   f"particles[{k}].permeability", "m^2"))
+            res.values[f"particles.{k}.permeability"] = kps[-1]
+            if kps[-1] >= kappa_free:
+                res.bad(f"particles[{k}].permeability", f"{kps[-1]:g} m^2 is not below the "
+                        f"open gap's H^2/12 = {kappa_free:.4g} m^2: such a particle would not "
+                        f"hinder the flow")
+        elif f.enabled:
             try:
                 kps.append(res.derived(
                     f"Kozeny-Carman permeability inside particles[{k}]",
                     lambda: kozeny_carman(t.sphericity, t.equivalent_diameter, t.area, f.gap),
                     f"fluid.gap, {_size_keys(k, sp)}", "m^2"))
+                res.note(f"particles.{k}.permeability", kps[-1],
+                         f"Kozeny-Carman, {kps[-1] / kappa_free:.3g} of the open gap's H^2/12")
             except ValueError as exc:
                 res.bad("fluid.gap", f"{exc} (species '{sp.name}')")
                 kps.append(kappa_free)

@@ -331,6 +331,10 @@ class SpeciesConfig(Config):
     xi: float | None = keyfield("float", "global damping of this species, 1/s; unset: "
                                "damping.xi (the resolved scene records each species' value)",
                                None, ge=0)
+    permeability: float | str = keyfield(
+           "float", 'permeability of the fluid cells a particle covers, m^2; "auto": '
+           "Kozeny-Carman of the cell column holding it (docs/model.md section 2.2)", AUTO,
+           auto=True, gt=0)
     drift_ratio: float | str = keyfield(
            "float", "speed of a lone particle of this species carried by the flow over the "
            "mean (depth-averaged) fluid speed, dimensionless; sets damping.xi = \"auto\" "
