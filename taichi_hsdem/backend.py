@@ -15,6 +15,9 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
+import sys
+import tempfile
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -41,6 +44,12 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
     Parameters
     ----------
     arch : {"cpu", "gpu", "auto"}
+        ``gpu``: the GPU Taichi finds (CUDA, else Vulkan, Metal, OpenGL), refused
+        where there is none, or where ``precision = "f64"`` and it has no float64
+        kernels. ``auto``: that GPU unless it is a software driver (Mesa's
+        llvmpipe, SwiftShader: about 100 times slower than the CPU backend) or
+        has no float64 kernels for an f64 run; else the CPU. Why is kept
+        (:func:`auto_reason`) and recorded in the resolved scene.
     precision : {"f64", "f32"}
 
     Examples
@@ -61,54 +70,146 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
                     f"start a new process for arch={arch}")
         return _STATE["arch"]
     fp = ti.f64 if precision == "f64" else ti.f32
-    target = {"cpu": ti.cpu, "gpu": ti.gpu, "auto": ti.gpu}[arch]
     # Once Taichi's worker threads run, a multi-threaded BLAS call on the pressure
     # solve's small vectors waits on them (measured: a 14,400-value dot product
     # 8 ms instead of 3 us): one BLAS thread, limited at run time because numpy
     # may have loaded before the environment variables could act.
     _STATE["blas_limit"] = threadpool_limits(limits=1, user_api="blas")
-    used = _ti_init(target, fp)
+    if arch == "cpu":
+        used, device = _ti_init(ti.cpu, fp), None
+    else:
+        used, device = _ti_init(ti.gpu, fp, name_device=True)
+    f64 = _probe_f64(used)
     why = None
-    if arch == "auto" and used in _NO_F64 and precision == "f64":
-        # e.g. Mesa's software Vulkan when no CUDA device exists: auto means "the
-        # fastest backend that runs this scene", so the CPU
-        why = f"{used} has no f64 kernels here: the CPU"
-        ti.reset()
-        used = _ti_init(ti.cpu, fp)
-    if arch == "gpu" and used in ("x64", "arm64"):
+    if arch == "auto" and used not in _CPUS:
+        if _is_software(device):
+            why = (f"{used} here is a software driver ({device}), about 100 times slower "
+                   "than the CPU backend: the CPU")
+        elif precision == "f64" and not f64:
+            why = (f"{used} has no float64 kernels: the CPU (run.precision = \"f32\" runs "
+                   f"on {used})")
+        else:
+            why = f"the GPU found: {used}" + (f" ({device})" if device else "")
+        if not why.startswith("the GPU"):
+            ti.reset()
+            used, device, f64 = _ti_init(ti.cpu, fp), None, True
+    elif arch == "auto":
+        why = "no GPU found (CUDA, Vulkan, Metal or OpenGL): the CPU"
+    if arch == "gpu" and used in _CPUS:
         raise BackendError("arch=gpu was requested but Taichi found no usable GPU "
                            "(CUDA, Vulkan or Metal); use --arch cpu or --arch auto")
-    if used in _NO_F64 and precision == "f64":
-        # e.g. Mesa's software Vulkan when no CUDA device exists: the level-set
-        # kernels' f64 trigonometry does not compile there.
-        raise BackendError(f"the GPU backend found is {used}, which has no f64 kernels here; "
+    if precision == "f64" and not f64:
+        raise BackendError(f"the GPU backend found is {used}, which has no float64 kernels; "
                            f"use --arch cpu, or --set run.precision=\"f32\"")
-    _STATE.update(request=(arch, precision), arch_request=arch, arch=used,
-                  precision=precision, real=fp, why=why)
+    _STATE.update(request=(arch, precision), arch_request=arch, arch=used, device=device,
+                  precision=precision, real=fp, why=why, f64=f64)
     return used
 
 
-#: Backends whose kernels have no float64 trigonometry here.
-_NO_F64 = ("vulkan", "metal", "opengl", "gles")
+#: Taichi's CPU backends.
+_CPUS = ("x64", "arm64")
+#: Backends whose kernels never have float64 (Taichi's Metal, OpenGL ES).
+NO_F64_ARCHS = _NO_F64 = ("metal", "gles")
+#: Device names of software drivers (Mesa's llvmpipe/lavapipe, Google's SwiftShader).
+_SOFTWARE = ("llvmpipe", "lavapipe", "swiftshader", "softpipe")
 
 
-def _ti_init(target, fp) -> str:
-    """``ti.init`` with the project's settings; the arch's name."""
+def _is_software(device) -> bool:
+    return device is not None and any(w in device.lower() for w in _SOFTWARE)
+
+
+def _probe_f64(used: str) -> bool:
+    """Whether kernels compute float64 here: always on the CPU and CUDA, never on
+    Metal and GLES; elsewhere (Vulkan, OpenGL: a device feature) a float64
+    kernel is compiled and its result compared with numpy's (to 1e-14: Mesa's
+    Vulkan divides by a constant as a product with its inverse, 1 ulp off; float32
+    would be 1e-8 off)."""
+    if used in _CPUS or used == "cuda":
+        return True
+    if used in _NO_F64:
+        return False
+    try:
+        a = ti.ndarray(ti.f64, 4)
+        a.from_numpy(np.arange(4.0) + 2.0)
+        _f64_probe(a)
+        got = a.to_numpy()
+    except Exception:   # noqa: BLE001 - any failure to compile or run: no float64
+        return False
+    x = np.arange(4.0) + 2.0
+    return bool(np.allclose(got, np.sqrt(x) / 3.0 + 1e-12 * np.arange(4.0), rtol=1e-14, atol=0))
+
+
+def _f64_probe(a):
+    for i in a:
+        a[i] = ti.sqrt(a[i]) / 3.0 + 1e-12 * ti.cast(i, ti.f64)
+
+
+# (annotations are strings in this module: Taichi needs the object)
+_f64_probe.__annotations__ = {"a": ti.types.ndarray(dtype=ti.f64, ndim=1)}
+_f64_probe = ti.kernel(_f64_probe)
+
+
+def _ti_init(target, fp, name_device: bool = False):
+    """``ti.init`` with the project's settings; the arch's name (and, with
+    ``name_device``, the GPU's name as Taichi's log gives it, or None)."""
     # Taichi prints "Starting on arch=..." on stdout; stdout belongs to the user.
-    with contextlib.redirect_stdout(io.StringIO()):
-        # fast_math=False: LLVM may not reorder floating-point arithmetic, so the
-        # kernels compute exactly what their source says on every CPU. With Taichi's
-        # default (fast_math=True) the fused and the per-step paths, or two CPUs with
-        # and without AVX-512, round differently (seen: 1e-13 apart).
-        threads = {} if thread_share() is None else {"cpu_max_num_threads": thread_share()}
-        ti.init(arch=target, default_fp=fp, default_ip=ti.i32, log_level=ti.ERROR,
-                offline_cache=True, fast_math=False, **threads)
-    return ti.lang.impl.current_cfg().arch.name
+    # fast_math=False: LLVM may not reorder floating-point arithmetic, so the
+    # kernels compute exactly what their source says on every CPU. With Taichi's
+    # default (fast_math=True) the fused and the per-step paths, or two CPUs with
+    # and without AVX-512, round differently (seen: 1e-13 apart).
+    threads = {} if thread_share() is None else {"cpu_max_num_threads": thread_share()}
+    settings = dict(arch=target, default_fp=fp, default_ip=ti.i32, offline_cache=True,
+                    fast_math=False, **threads)
+    if not name_device:
+        with contextlib.redirect_stdout(io.StringIO()):
+            ti.init(log_level=ti.ERROR, **settings)
+        return ti.lang.impl.current_cfg().arch.name
+    # the device's name is in Taichi's (C++) trace log only: read it from the
+    # process's own stdout and stderr while ti.init runs
+    with tempfile.TemporaryFile(mode="w+b") as log, contextlib.redirect_stdout(io.StringIO()):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [os.dup(1), os.dup(2)]
+        try:
+            os.dup2(log.fileno(), 1)
+            os.dup2(log.fileno(), 2)
+            ti.init(log_level=ti.TRACE, **settings)
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            ti.set_logging_level(ti.ERROR)
+        log.seek(0)
+        text = log.read().decode("utf-8", "replace")
+    found = re.search(r"Found Vulkan Device \d+ \((.*)\)\s*$", text, re.MULTILINE)
+    return ti.lang.impl.current_cfg().arch.name, (found.group(1) if found else None)
 
 
 def auto_reason() -> str | None:
-    """Why ``arch = "auto"`` did not take the GPU it found, or None."""
+    """What ``arch = "auto"`` chose and why (None for an explicit arch)."""
     return _STATE.get("why")
+
+
+def current_arch() -> str | None:
+    """The backend :func:`init` chose, or None before it."""
+    return _STATE.get("arch")
+
+
+def device() -> str | None:
+    """The GPU's name where Taichi's log gives it (Vulkan), else None."""
+    return _STATE.get("device")
+
+
+def has_f64() -> bool:
+    """Whether this backend's kernels compute float64 (:func:`_probe_f64`)."""
+    return bool(_STATE.get("f64", True))
+
+
+def solve_real():
+    """The float type of the Taichi pressure solve: float64 wherever the backend
+    has it (whatever the run's precision), else float32."""
+    return ti.f64 if has_f64() else ti.f32
 
 
 def real():

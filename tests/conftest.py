@@ -6,11 +6,14 @@ takes one precision per process) and then only the tests marked
 f32's round-off matters. ``tests/test_precision.py`` runs that in a subprocess of
 the default (f64) run.
 
-``python -m pytest --arch gpu`` runs the same tests on the GPU backend (CUDA):
-every simulation a test builds runs there whatever its scene's ``run.arch``, and
-the run stops at once, with a message, where Taichi finds no GPU with float64
-kernels. Tests that check the CPU's own paths (the fused disk stepper, ``x64`` in
-a summary) are expected to fail there; the rest hold the same tolerances.
+``python -m pytest --arch gpu`` runs the tests marked ``gpu`` (tests/test_gpu.py)
+on the GPU backend Taichi finds (CUDA, Vulkan, Metal; here Mesa's software Vulkan),
+each comparing its GPU run with the CPU run of the same thing; every simulation
+a test builds runs there, whatever its scene's ``run.arch``. The run stops at
+once with exit status 2 and a message where Taichi finds no GPU (or, for f64, none
+with float64 kernels). The default (CPU) run leaves the ``gpu`` tests out and runs
+them in a subprocess instead (tests/test_gpu_suite.py), skipped with the reason
+where there is no GPU.
 """
 import numpy as np
 import pytest
@@ -26,22 +29,28 @@ def pytest_addoption(parser):
                      help="floating-point type of the kernels for this run; f32 runs only "
                           "the tests marked both_precisions")
     parser.addoption("--arch", choices=("cpu", "gpu"), default="cpu",
-                     help="Taichi backend of this run (gpu: every simulation of the tests on "
-                          "the GPU, whatever its scene's run.arch)")
+                     help="Taichi backend of this run (gpu: the tests marked gpu, every "
+                          "simulation on the GPU, whatever its scene's run.arch)")
 
 
 def pytest_configure(config):
     _PRECISION["value"] = config.getoption("--precision")
     _PRECISION["arch"] = config.getoption("--arch")
+    config.addinivalue_line("markers", "gpu: compares a GPU run with the CPU's; runs with "
+                                       "--arch gpu only (tests/test_gpu_suite.py)")
 
 
 def pytest_collection_modifyitems(config, items):
-    if precision() == "f64":
-        return
-    skip = pytest.mark.skip(reason="f64 only (not marked both_precisions)")
+    gpu = _PRECISION["arch"] == "gpu"
+    skip_cpu = pytest.mark.skip(reason="a CPU test (--arch gpu runs the tests marked gpu)")
+    skip_gpu = pytest.mark.skip(reason="a GPU test: python -m pytest --arch gpu (the default "
+                                       "run has tests/test_gpu_suite.py run them)")
+    skip_f64 = pytest.mark.skip(reason="f64 only (not marked both_precisions)")
     for item in items:
-        if "both_precisions" not in item.keywords:
-            item.add_marker(skip)
+        if (item.get_closest_marker("gpu") is not None) != gpu:
+            item.add_marker(skip_gpu if not gpu else skip_cpu)
+        elif precision() != "f64" and "both_precisions" not in item.keywords:
+            item.add_marker(skip_f64)
 
 
 def precision() -> str:

@@ -208,12 +208,12 @@ def test_implicit_needs_the_taichi_solver_and_says_so():
 
 
 @pytest.mark.parametrize("arch, solver, carried", [("x64", "auto", True), ("cuda", "auto", True),
-                                                   ("vulkan", "auto", False),
-                                                   ("metal", "auto", False),
+                                                   ("vulkan", "auto", True),
+                                                   ("metal", "auto", True),   # in float32
                                                    ("x64", "amg", False), ("x64", "gmg", True)])
 def test_particle_flux_auto_carries_the_volume_wherever_gmg_solves(arch, solver, carried):
     # The default: the carried volume wherever its implicit coupling can run (the
-    # Taichi CG, float64 kernels), fixed obstacles where pyamg solves the pressure
+    # Taichi CG, on every backend), fixed obstacles where pyamg solves the pressure
     # (only the lagged coupling there, unstable once particles jam). The choice and
     # its reason go into the resolved scene, and the damping's auto rule follows it.
     scene = jam_scene("implicit", 1.0)

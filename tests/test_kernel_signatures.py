@@ -1,7 +1,11 @@
 """Every Taichi kernel and function takes at most 16 parameters: arrays travel in
-their bundle's argument pack (``dem/state.py``), not one by one (issue 33)."""
+their bundle's argument pack (``dem/state.py``), not one by one (issue 33); and
+every task of a kernel a GPU run launches reads at most 31 arrays (issue 34)."""
 import importlib
 import inspect
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -101,3 +105,30 @@ def test_a_part_packs_some_of_a_bundles_arrays():
     assert bodies.pack_of(pose)["alive"] is bodies.alive            # follows a replaced array
     with pytest.raises(TypeError, match=r"Materials\.x: Bodies already has an array"):
         state.Materials.part("x")
+
+
+# A GPU shader binds each array its task reads to a slot: Metal has 31; Mesa's
+# Vulkan gives wrong results past 32 (docs/performance.md, Kernel launches).
+MAX_ARRAYS = 31
+# the kernels tests/kernel_arrays.py must see compiled (a GPU run's widest)
+GPU_KERNELS = ("contact.ls_pair_contacts", "contact.ls_wall_contacts", "contact.disk_contacts",
+               "integrate.advance_kernel", "coupling.rasterize_permeability",
+               "coupling.body_drift", "coupling.pressure_forces", "neighbors.build_neighbors",
+               "_gmg_cg._cg_step", "_gmg_cg._check_stopped", "_gmg_bodies._body_rhs")
+
+
+def test_every_task_a_gpu_run_launches_reads_at_most_31_arrays():
+    # Counted in Taichi's own IR of the kernels a GPU run launches (compiled on the
+    # CPU, the GPU's kernel choices forced: tests/kernel_arrays.py). The CPU-only
+    # kernels are wider and never run on a GPU: ls_contacts (34 arrays, split in
+    # two there) and the fused disk stepper (42; refused on a GPU).
+    proc = subprocess.run([sys.executable, str(Path(__file__).parent / "kernel_arrays.py")],
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    counts = json.loads(proc.stdout)
+    ours = {k.removeprefix("taichi_hsdem."): v for k, v in counts.items()
+            if k.startswith("taichi_hsdem.")}
+    for name in GPU_KERNELS:
+        assert any(k.endswith(name) for k in ours), (name, sorted(ours))
+    assert all(0 < v <= MAX_ARRAYS for v in ours.values()), ours
+    assert not any(k.endswith(("contact.ls_contacts", "fused.disk_steps")) for k in ours)

@@ -39,7 +39,7 @@ pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
 """
 
 from ..backend import ti  # sets the environment before Taichi loads
-from .kmath import cross, node_world, rot, rot_t, spin, template_sample, wall_sample
+from .kmath import cross, node_world, rot, rot_t, sin_cos, spin, template_sample, wall_sample
 from ..layout import BAD_PASSED, F_HISTORY_OVERFLOW, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
 from .neighbors import NEIGHBORS
 from .state import Batch, Bodies, Materials, Particles, ShearHistory, Templates, WallGrid
@@ -133,15 +133,18 @@ def find_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.template
 
 
 @ti.func
-def store_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.template(), partner, fs, flags: ti.template()):
+def store_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.template(), partner, fs):
+    """Keep the shear ``fs`` of node ``k`` against ``partner``; returns 1 if every
+    slot was taken (the contact force is kept, its history dropped), else 0. The
+    caller counts the drops into ``flags[F_HISTORY_OVERFLOW]`` after its loops:
+    Taichi 1.7.4's integer atomics inside a loop break the loop on Vulkan."""
     stored = 0
     for s in ti.static(range(slots)):
         if stored == 0 and hp[r, i, k, s] == 0:
             hp[r, i, k, s] = partner + 1
             hs[r, i, k, s] = fs
             stored = 1
-    if stored == 0:
-        flags[F_HISTORY_OVERFLOW] += 1  # contact force kept, its history dropped
+    return 1 - stored
 
 
 @ti.kernel
@@ -161,14 +164,67 @@ def ls_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pac
         ti.atomic_max(batch.max_overlap[r], deepest)
 
 
+@ti.kernel
+def ls_pair_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pack,
+                     materials: Materials.Pack, templates: Templates.Pack,
+                     history: ShearHistory.Pack, neighbors: NEIGHBORS, flags: ti.types.ndarray(),
+                     part_f: ti.types.ndarray(), part_m: ti.types.ndarray(),
+                     slots: ti.template(), dt: float, normalize: ti.i32):
+    """The first half of :func:`ls_contacts` for a GPU, whose shaders read at most
+    31 arrays (ls_contacts reads 34): each body's contacts with its neighbours,
+    into ``part_f`` ((R, N, 2)) and ``part_m`` ((R, N, 2): moment, deepest
+    overlap); :func:`ls_wall_contacts` adds the walls' and both to the body, the
+    same operations in the same order as ls_contacts."""
+    for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
+        if batch.running[r] == 0 or bodies.alive[r, i] == 0:
+            continue
+        f, m, deepest = ls_pairs(bodies, batch, particles, materials, templates, history,
+                                 neighbors, flags, slots, dt, normalize, r, i)
+        for c in ti.static(range(2)):
+            part_f[r, i, c] = f[c]
+        part_m[r, i, 0] = m
+        part_m[r, i, 1] = deepest
+
+
+@ti.kernel
+def ls_wall_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pack,
+                     materials: Materials.Pack, templates: Templates.Pack, walls: WallGrid.Pack,
+                     history: ShearHistory.Pack, flags: ti.types.ndarray(),
+                     part_f: ti.types.ndarray(), part_m: ti.types.ndarray(),
+                     slots: ti.template(), dt: float, normalize: ti.i32):
+    """The second half (see :func:`ls_pair_contacts`)."""
+    for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
+        if batch.running[r] == 0 or bodies.alive[r, i] == 0:
+            continue
+        fw, mw, deepest = ls_walls(bodies, particles, materials, templates, walls, history,
+                                   flags, slots, dt, normalize, part_m[r, i, 1], r, i)
+        bodies.force[r, i] += vec2(part_f[r, i, 0], part_f[r, i, 1]) + fw
+        bodies.torque[r, i] += part_m[r, i, 0] + mw
+        ti.atomic_max(batch.max_overlap[r], deepest)
+
+
 @ti.func
 def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template(),
              materials: ti.template(), templates: ti.template(), walls: ti.template(),
              history: ti.template(), neighbors: ti.template(), flags: ti.template(),
              slots: ti.template(), dt, normalize, r, i):
     """Contact force, moment and deepest overlap (fraction of d_eq) on body ``i``
-    of realization ``r`` from its listed neighbours and the walls; writes its new
-    shear history.
+    of realization ``r``: :func:`ls_pairs`, then :func:`ls_walls`."""
+    f, m, deepest = ls_pairs(bodies, batch, particles, materials, templates, history, neighbors,
+                             flags, slots, dt, normalize, r, i)
+    fw, mw, deepest = ls_walls(bodies, particles, materials, templates, walls, history, flags,
+                               slots, dt, normalize, deepest, r, i)
+    return f + fw, m + mw, deepest
+
+
+@ti.func
+def ls_pairs(bodies: ti.template(), batch: ti.template(), particles: ti.template(),
+             materials: ti.template(), templates: ti.template(), history: ti.template(),
+             neighbors: ti.template(), flags: ti.template(), slots: ti.template(), dt,
+             normalize, r, i):
+    """Contact force, moment and deepest overlap (fraction of d_eq) on body ``i``
+    of realization ``r`` from its listed neighbours; starts its new shear history
+    (:func:`ls_walls` adds the walls' entries).
 
     A body whose inside point (the deepest point of its template, ``inside``:
     not its centre of mass, which an L-shape's notch holds) lies inside a
@@ -184,8 +240,7 @@ def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template
     n_part = bodies.x.shape[1]
     ti_ = particles.species[i]
     xi = bodies.x[r, i]
-    ci = ti.cos(bodies.theta[r, i])
-    si = ti.sin(bodies.theta[r, i])
+    ci, si = sin_cos(bodies.theta[r, i])
     vi = bodies.v[r, i]
     wi = bodies.omega[r, i]
     noff_i = templates.node_meta[ti_, 0]
@@ -198,6 +253,8 @@ def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template
     ftot = vec2(0.0, 0.0)
     mtot = 0.0
     deepest = 0.0
+    dropped = 0
+    passed = 0
     for q in range(neighbors.nbr_n[r, i]):
         j = neighbors.nbr[r, i, q]
         if bodies.alive[r, j] == 0:
@@ -207,8 +264,7 @@ def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template
         rb_j = particles.bounding_radius[j]
         if (xi - xj).norm() >= rb_i + rb_j:
             continue
-        cj = ti.cos(bodies.theta[r, j])
-        sj = ti.sin(bodies.theta[r, j])
+        cj, sj = sin_cos(bodies.theta[r, j])
         vj = bodies.v[r, j]
         wj = bodies.omega[r, j]
         a, b = particles.species[i], particles.species[j]
@@ -222,7 +278,7 @@ def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template
         held, _ = template_sample(templates.ls_phi, templates.ls_grad, templates.ls_meta,
                                   templates.ls_geo, tj, rot_t(cj, sj, pole_i - xj))
         if held < 0.0:
-            ti.atomic_or(batch.bad[r], BAD_PASSED)
+            passed = 1
         # (a) nodes of i inside j: force on i, history owned by i.
         fa = vec2(0.0, 0.0)
         ma = 0.0
@@ -240,8 +296,8 @@ def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template
                 fs_old = find_shear(history.partners_old, history.shear_old, r, i, k,
                                     slots, j)
                 fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
-                store_shear(history.partners_new, history.shear_new, r, i, k, slots, j,
-                            fs, flags)
+                dropped += store_shear(history.partners_new, history.shear_new, r, i, k,
+                                       slots, j, fs)
                 fa += fn + fs
                 ma += cross(p - xi, fn + fs)
                 na += 1
@@ -279,7 +335,30 @@ def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template
         both = 0.5 if na > 0 and nb > 0 else 1.0
         ftot += both * (fa + fb)
         mtot += both * (ma + mb)
-    # Walls: nodes of i against the static wall level set.
+    if passed != 0:    # after the loops (store_shear)
+        ti.atomic_or(batch.bad[r], BAD_PASSED)
+    if dropped != 0:
+        flags[F_HISTORY_OVERFLOW] += dropped
+    return ftot, mtot, deepest
+
+
+@ti.func
+def ls_walls(bodies: ti.template(), particles: ti.template(), materials: ti.template(),
+             templates: ti.template(), walls: ti.template(), history: ti.template(),
+             flags: ti.template(), slots: ti.template(), dt, normalize, deepest_pairs, r, i):
+    """The walls' part of :func:`ls_force`: the nodes of body ``i`` against the
+    static wall level set; the deepest overlap so far comes in (``deepest_pairs``)
+    and goes out updated."""
+    n_part = bodies.x.shape[1]
+    ti_ = particles.species[i]
+    xi = bodies.x[r, i]
+    ci, si = sin_cos(bodies.theta[r, i])
+    vi = bodies.v[r, i]
+    wi = bodies.omega[r, i]
+    noff_i = templates.node_meta[ti_, 0]
+    nn_i = templates.node_meta[ti_, 1]
+    deepest = deepest_pairs
+    dropped = 0
     a = particles.species[i]
     kn = materials.wall[a, PAIR_KN]
     ks = materials.wall[a, PAIR_KS]
@@ -300,8 +379,8 @@ def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template
             fs_old = find_shear(history.partners_old, history.shear_old, r, i, k, slots,
                                 n_part)
             fn, fs = contact_law(-phi, nrm, u, fs_old, kn, ks, mu, gamma, dt)
-            store_shear(history.partners_new, history.shear_new, r, i, k, slots, n_part,
-                        fs, flags)
+            dropped += store_shear(history.partners_new, history.shear_new, r, i, k, slots,
+                                   n_part, fs)
             fc = fn + fs
             mc = cross(p - xi, fc)
             fw += fc
@@ -319,7 +398,9 @@ def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template
         else:
             fw /= nw
             mw /= nw
-    return ftot + fw, mtot + mw, deepest
+    if dropped != 0:   # after the loops (store_shear)
+        flags[F_HISTORY_OVERFLOW] += dropped
+    return fw, mw, deepest
 
 
 @ti.kernel
@@ -362,6 +443,7 @@ def disk_force(bodies: ti.template(), particles: ti.template(), materials: ti.te
     ftot = vec2(0.0, 0.0)
     mtot = 0.0
     deepest = 0.0
+    dropped = 0
     for q in range(neighbors.nbr_n[r, i]):
         j = neighbors.nbr[r, i, q]
         if bodies.alive[r, j] == 0:
@@ -384,7 +466,7 @@ def disk_force(bodies: ti.template(), particles: ti.template(), materials: ti.te
             fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, j)
             fn, fs = contact_law(depth, nrm, u, fs_old, kn, materials.pair[a, b, PAIR_KS],
                                  materials.pair[a, b, PAIR_MU], gamma, dt)
-            store_shear(hp_new, hs_new, r, i, 0, slots, j, fs, flags)
+            dropped += store_shear(hp_new, hs_new, r, i, 0, slots, j, fs)
             ftot += fn + fs
             mtot += cross(ra, fs)
             deepest = ti.max(deepest, depth / (2.0 * ri))
@@ -400,10 +482,12 @@ def disk_force(bodies: ti.template(), particles: ti.template(), materials: ti.te
         fs_old = find_shear(hp_old, hs_old, r, i, 0, slots, n_part)
         fn, fs = contact_law(depth, nrm, u, fs_old, kn, materials.wall[a, PAIR_KS],
                              materials.wall[a, PAIR_MU], gamma, dt)
-        store_shear(hp_new, hs_new, r, i, 0, slots, n_part, fs, flags)
+        dropped += store_shear(hp_new, hs_new, r, i, 0, slots, n_part, fs)
         ftot += fn + fs
         mtot += cross(ra, fs)
         deepest = ti.max(deepest, depth / (2.0 * ri))
+    if dropped != 0:   # after the loops (store_shear)
+        flags[F_HISTORY_OVERFLOW] += dropped
     return ftot, mtot, deepest
 
 
@@ -417,6 +501,27 @@ def add_forces(bodies, batch, particles, materials, templates, walls, history, n
     if disks:
         disk_contacts(*packs, walls.pack(), history.pack(), neighbors.pack(), flags,
                       history.slots, dt)
-    else:
+    elif not (SPLIT_LS_CONTACTS or ti.lang.impl.current_cfg().arch not in (ti.x64, ti.arm64)):
         ls_contacts(*packs, templates.pack(), walls.pack(), history.pack(), neighbors.pack(),
                     flags, history.slots, dt, int(normalize))
+    else:   # a GPU: two kernels of at most 31 arrays each, the same bits
+        part_f, part_m = _parts(bodies.x.shape)
+        ls_pair_contacts(*packs, templates.pack(), history.pack(), neighbors.pack(), flags,
+                         part_f, part_m, history.slots, dt, int(normalize))
+        ls_wall_contacts(*packs, templates.pack(), walls.pack(), history.pack(), flags,
+                         part_f, part_m, history.slots, dt, int(normalize))
+
+
+#: Whether the level-set contacts take the two kernels of a GPU on the CPU too
+#: (tests/kernel_arrays.py counts their arrays on the CPU).
+SPLIT_LS_CONTACTS = False
+_PARTS = {}
+
+
+def _parts(shape):
+    """The pair contacts' sums that ls_pair_contacts hands to ls_wall_contacts."""
+    shape = tuple(shape)
+    if shape not in _PARTS:
+        from .. import backend
+        _PARTS[shape] = tuple(ti.ndarray(backend.real(), shape + (2,)) for _ in range(2))
+    return _PARTS[shape]

@@ -32,9 +32,9 @@ import numpy as np
 from .. import backend
 from ..backend import ti  # sets the environment before Taichi loads
 from ..fluid import PressureSolver
-from ..fluid.gmg import BodyTerms, TaichiPressureSolver
+from ..fluid.gmg import REAL, BodyTerms, TaichiPressureSolver
 from . import state
-from .kmath import cross, node_world, rot, rot_t, spin, template_sample
+from .kmath import cross, exp_neg, node_world, rot, rot_t, sin_cos, spin, template_sample
 from ..layout import SAMPLING
 
 vec2 = ti.math.vec2
@@ -53,7 +53,10 @@ _NODES = state.Templates.part("node_pos", "node_area", "node_meta")
 # bodies' state at the last solve with their terms of the next (body_drift).
 _CELLS = state.pack_type("FluidCoupling", ("base", "cell_kappa", "carried", "owner", "vs",
                                            "ws"))
-_DRIFT = state.pack_type("FluidCoupling", ("past", "centre", "mobility", "drift"))
+# (in the pressure solve's float type, REAL; ``drift_consts``: the fluid interval,
+# the gap and the grid's origin and cell size, as arrays of that type carry them)
+_DRIFT = state.pack_type("FluidCoupling", ("past", "centre", "mobility", "drift",
+                                           "drift_consts"))
 
 
 @ti.func
@@ -72,35 +75,40 @@ def inside_body(templates: ti.template(), tm, q):
 @ti.kernel
 def rasterize_permeability(bodies: _POSE, sp: ti.types.ndarray(), rb: ti.types.ndarray(),
                            kp: ti.types.ndarray(), templates: _LEVEL_SETS, cells: _CELLS,
-                           ox: float, oy: float, h: float):
+                           ox: float, oy: float, h: float, span: ti.i32):
     """Permeability of every fluid cell, ``chi v``: the velocity of the particle
     a cell's centre lies in (``vs + ws x r``), zero outside particles, and
-    ``owner``: that particle (the highest-numbered where two overlap), -1."""
+    ``owner``: that particle (the highest-numbered where two overlap), -1.
+
+    A thread per cell of each body's box of cells (``span`` cells a side at
+    most), not a loop over the box in a thread per body: a GPU gets the threads,
+    and Taichi 1.7.4's integer atomics inside a loop break that loop on Vulkan
+    (Mesa's lavapipe: the loop stops early and what follows it is lost)."""
     nx = cells.base.shape[0]
     ny = cells.base.shape[1]
     for r, cx, cy in cells.cell_kappa:
         cells.cell_kappa[r, cx, cy] = cells.base[cx, cy]
         cells.carried[r, cx, cy] = vec2(0.0, 0.0)
         cells.owner[r, cx, cy] = -1
-    for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
+    for r, i, t in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1], span * span):
         if bodies.alive[r, i] == 0:
             continue
         xi = bodies.x[r, i]
-        c = ti.cos(bodies.theta[r, i])
-        s = ti.sin(bodies.theta[r, i])
         i0 = ti.max(ti.cast(ti.floor((xi.x - rb[i] - ox) / h - 0.5), ti.i32), 0)
         i1 = ti.min(ti.cast(ti.ceil((xi.x + rb[i] - ox) / h - 0.5), ti.i32), nx - 1)
         j0 = ti.max(ti.cast(ti.floor((xi.y - rb[i] - oy) / h - 0.5), ti.i32), 0)
         j1 = ti.min(ti.cast(ti.ceil((xi.y + rb[i] - oy) / h - 0.5), ti.i32), ny - 1)
-        for a in range(i0, i1 + 1):
-            for b in range(j0, j1 + 1):
-                if cells.base[a, b] > 0.0:
-                    centre = vec2(ox + (a + 0.5) * h, oy + (b + 0.5) * h)
-                    if inside_body(templates, sp[i], rot_t(c, s, centre - xi)):
-                        ti.atomic_min(cells.cell_kappa[r, a, b], kp[sp[i]])
-                        ti.atomic_max(cells.owner[r, a, b], i)
-                        cells.carried[r, a, b] = (cells.vs[r, i]
-                                                  + spin(cells.ws[r, i], centre - xi))
+        a = i0 + t // span
+        b = j0 + t % span
+        if a <= i1 and b <= j1:
+            if cells.base[a, b] > 0.0:
+                c, s = sin_cos(bodies.theta[r, i])
+                centre = vec2(ox + (a + 0.5) * h, oy + (b + 0.5) * h)
+                if inside_body(templates, sp[i], rot_t(c, s, centre - xi)):
+                    ti.atomic_min(cells.cell_kappa[r, a, b], kp[sp[i]])
+                    ti.atomic_max(cells.owner[r, a, b], i)
+                    cells.carried[r, a, b] = (cells.vs[r, i]
+                                              + spin(cells.ws[r, i], centre - xi))
 
 
 @ti.func
@@ -146,19 +154,18 @@ def _interval_shares(y):
     ``y = xi T``: ``(alpha, g)`` with the interval's mean velocity
     ``alpha v0 + g T F / m``: ``alpha = (1 - exp(-y)) / y``, ``g = (1 - alpha) / y``
     (1 and 1/2 at y = 0, by the series below y = 0.01)."""
-    g = ti.f64(0.5)
+    g = ti.cast(0.5, REAL.dtype)
     if y < 0.01:
         g = 0.5 + y * (-1.0 / 6.0 + y * (1.0 / 24.0 - y / 120.0))
     else:
-        g = (y - 1.0 + ti.exp(-y)) / (y * y)
+        g = (y - 1.0 + exp_neg(y)) / (y * y)
     return 1.0 - y * g, g
 
 
 @ti.kernel
 def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), sp: ti.types.ndarray(),
                mass: ti.types.ndarray(), inertia: ti.types.ndarray(), xi: ti.types.ndarray(),
-               carried: ti.types.ndarray(), terms: _DRIFT, interval: ti.f64, gap: ti.f64,
-               ox: ti.f64, oy: ti.f64, h: ti.f64):
+               carried: ti.types.ndarray(), terms: _DRIFT):
     """fluid.gmg.BodyTerms of every body but ``owner``: its mean velocity over the
     next fluid interval if the force it felt over the last one were held,
     ``drift = alpha v0 + g T F / m``, and how that changes with the pressure
@@ -172,35 +179,37 @@ def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), sp: ti.ty
     fraction: the solve's source is the flux the body's cells carry, ``c`` times
     its velocity (docs/model.md section 3.4)."""
     for r, i in ti.ndrange(bodies.v.shape[0], bodies.v.shape[1]):
+        interval, gap = terms.drift_consts[0], terms.drift_consts[1]
+        ox, oy, h = terms.drift_consts[2], terms.drift_consts[3], terms.drift_consts[4]
         for q in ti.static(range(3)):
             terms.mobility[r, i, q] = 0.0
             terms.drift[r, i, q] = 0.0
-        terms.centre[r, i, 0] = (ti.cast(bodies.x[r, i].x, ti.f64) - ox) / h - 0.5
-        terms.centre[r, i, 1] = (ti.cast(bodies.x[r, i].y, ti.f64) - oy) / h - 0.5
-        now = ti.Vector([ti.cast(bodies.x[r, i].x, ti.f64),
-                         ti.cast(bodies.x[r, i].y, ti.f64),
-                         ti.cast(bodies.theta[r, i], ti.f64)], dt=ti.f64)
-        vel = ti.Vector([ti.cast(bodies.v[r, i].x, ti.f64),
-                         ti.cast(bodies.v[r, i].y, ti.f64),
-                         ti.cast(bodies.omega[r, i], ti.f64)], dt=ti.f64)
+        terms.centre[r, i, 0] = (ti.cast(bodies.x[r, i].x, REAL.dtype) - ox) / h - 0.5
+        terms.centre[r, i, 1] = (ti.cast(bodies.x[r, i].y, REAL.dtype) - oy) / h - 0.5
+        now = ti.Vector([ti.cast(bodies.x[r, i].x, REAL.dtype),
+                         ti.cast(bodies.x[r, i].y, REAL.dtype),
+                         ti.cast(bodies.theta[r, i], REAL.dtype)], dt=REAL.dtype)
+        vel = ti.Vector([ti.cast(bodies.v[r, i].x, REAL.dtype),
+                         ti.cast(bodies.v[r, i].y, REAL.dtype),
+                         ti.cast(bodies.omega[r, i], REAL.dtype)], dt=REAL.dtype)
         play = running[r] != 0 and bodies.alive[r, i] != 0
         if play:
-            k = ti.cast(xi[sp[i]], ti.f64)
+            k = ti.cast(xi[sp[i]], REAL.dtype)
             alpha, g = _interval_shares(k * interval)
-            inert = ti.Vector([ti.cast(mass[i], ti.f64), ti.cast(mass[i], ti.f64),
-                               ti.cast(inertia[i], ti.f64)], dt=ti.f64)
-            impulse = ti.Vector([0.0, 0.0, 0.0], dt=ti.f64)   # (mean force) T / inertia
+            inert = ti.Vector([ti.cast(mass[i], REAL.dtype), ti.cast(mass[i], REAL.dtype),
+                               ti.cast(inertia[i], REAL.dtype)], dt=REAL.dtype)
+            impulse = ti.Vector([0.0, 0.0, 0.0], dt=REAL.dtype)   # (mean force) T / inertia
             if terms.past[r, i, 6] != 0:
                 for q in ti.static(range(3)):
                     impulse[q] = ((vel[q] - terms.past[r, i, 3 + q])
                                   + k * (now[q] - terms.past[r, i, q]))
             else:
                 held, ext = bodies.f_fluid[r, i], bodies.f_ext[r, i]
-                load = ti.Vector([ti.cast(held.x + ext.x, ti.f64), ti.cast(held.y + ext.y, ti.f64),
+                load = ti.Vector([ti.cast(held.x + ext.x, REAL.dtype), ti.cast(held.y + ext.y, REAL.dtype),
                                   ti.cast(bodies.tau_fluid[r, i] + bodies.tau_ext[r, i],
-                                          ti.f64)], dt=ti.f64)
+                                          REAL.dtype)], dt=REAL.dtype)
                 impulse = load * interval / inert
-            c = ti.cast(carried[sp[i]], ti.f64)
+            c = ti.cast(carried[sp[i]], REAL.dtype)
             for q in ti.static(range(3)):
                 terms.mobility[r, i, q] = c * (gap * g * interval / inert[q])
                 terms.drift[r, i, q] = c * (alpha * vel[q] + g * impulse[q])
@@ -224,8 +233,7 @@ def pressure_forces(bodies: _HELD, running: ti.types.ndarray(), which: ti.types.
             msum = 0.0
             if running[r] != 0 and bodies.alive[r, i] != 0:
                 xi = bodies.x[r, i]
-                c = ti.cos(bodies.theta[r, i])
-                s = ti.sin(bodies.theta[r, i])
+                c, s = sin_cos(bodies.theta[r, i])
                 off = templates.node_meta[sp[i], 0]
                 for k in range(templates.node_meta[sp[i], 1]):
                     p = node_world(templates.node_pos, off + k, xi, c, s)
@@ -301,9 +309,13 @@ class FluidCoupling:
         self.terms = None
         self._drift = None      # their pack with past (_DRIFT)
         # per body at the last solve: x, y, theta, v_x, v_y, omega, in play (1/0)
-        self.past = state._zeros((n_real, n_part, 7), ti.f64) if self.implicit else None
+        real = self.solver.real if self.on_device else ti.f64   # the solve's float type
+        self.past = state._zeros((n_real, n_part, 7), real) if self.implicit else None
         self.interval = float(fl.update_interval) * float(model.dt)
         self.grid = (float(g.x_min), float(g.y_min), float(model.fluid_dx))
+        # cells a side of the largest body's box of cells (rasterize_permeability)
+        self._span = int(np.ceil(2.0 * max(s.shape.bounding_radius for s in model.species)
+                                 / float(model.fluid_dx))) + 3
         self.gap = float(fl.gap)
         self.sampling = SAMPLING[fl.pressure_sampling]
         self._pressure = np.full(shape, np.nan)    # the last solve's, Pa (NaN: walls)
@@ -381,13 +393,17 @@ class FluidCoupling:
         self.apply_forces(bodies, batch, particles, templates)
         R, N = self.v_src.shape[:2]
         if self.terms is None:
-            self.terms = BodyTerms(self.owner, *(ti.ndarray(ti.f64, (R, N, c)) for c in (2, 3, 3)))
+            real = self.solver.real
+            self.terms = BodyTerms(self.owner, *(ti.ndarray(real, (R, N, c)) for c in (2, 3, 3)))
+            consts = ti.ndarray(real, 5)
+            consts.from_numpy(np.array([self.interval, self.gap, *self.grid],
+                                       dtype=np.float64 if real == ti.f64 else np.float32))
             self._drift = _DRIFT(past=self.past, centre=self.terms.centre,
-                                 mobility=self.terms.mobility, drift=self.terms.drift)
+                                 mobility=self.terms.mobility, drift=self.terms.drift,
+                                 drift_consts=consts)
+        REAL.dtype = self.solver.real   # body_drift computes in the solve's float type
         body_drift(b.pack(), batch.running, particles.species, particles.mass,
-                   particles.inertia, materials.xi, materials.carry, self._drift,
-                   self.interval, self.gap,
-                   *self.grid)
+                   particles.inertia, materials.xi, materials.carry, self._drift)
         return self.terms
 
     def _source_velocities(self, bodies):
@@ -423,7 +439,7 @@ class FluidCoupling:
         b, t = bodies, templates
         rasterize_permeability(b.pack_of(_POSE), particles.species, particles.bounding_radius,
                                materials.kappa, t.pack_of(_LEVEL_SETS), self._cells,
-                               *self.grid)
+                               *self.grid, self._span)
         self.updates += 1
         frac = m.scene.fluid.resolve_fraction
         # re-solve only when kappa changed enough: never with a carried flux, which

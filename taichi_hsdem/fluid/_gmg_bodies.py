@@ -21,11 +21,10 @@ way (the pressure gradient summed over the owned cells). So the pressure solves
 exactly. The matrix is ``A`` plus one symmetric positive semi-definite term per
 body: CG applies as before, preconditioned by the multigrid of ``A`` alone.
 
-Arrays: ``owner`` (R, nx, ny) int32 (-1: no body), ``centre`` (R, N, 2) float64
-in cell units (cell ``(i, j)``'s centre at ``(i, j)``), ``mobility`` (R, N, 3)
+Arrays: ``owner`` (R, nx, ny) int32 (-1: no body), ``centre`` (R, N, 2) in cell units (cell ``(i, j)``'s centre at ``(i, j)``), ``mobility`` (R, N, 3)
 ``H M`` (0 for a body out of play), ``drift`` (R, N, 3) ``q``. The kernels take
 them as one argument pack of type :data:`Terms`: ``owner``, the grid's
-``unknown`` cells, ``body`` (R, N, 11) float64 with named columns (the centre
+``unknown`` cells, ``body`` (R, N, 11) of the solve's float type with named columns (the centre
 and ``H M``, copied in by :func:`_body_rhs`, and the work vectors ``y = S^T x``,
 ``z = H M y``) and ``box`` (R, N, 4) int32 (each body's box of cells, found by
 :func:`_body_rhs`): four arrays, not seven, as each array costs a launch of the
@@ -35,7 +34,8 @@ result depends on nothing else in the batch, nor on how the threads are laid out
 Package-internal: :mod:`.gmg` is the API."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 from ..backend import ti
-from ._gmg_cycle import _BASE, _NX, _NY, _RHS, _SOL, _Cells, _Field, _Ints, _Rows, _index
+from ._gmg_cycle import (REAL, _BASE, _K_DX, _K_DY, _NX, _NY, _RHS, _SOL, _Cells, _Consts,
+                         _Field, _Ints, _Rows, _index)
 
 _Owner = ti.types.ndarray(dtype=ti.i32, ndim=3)   # (R, nx, ny): a body's number or -1
 
@@ -53,7 +53,7 @@ def _face_weight(owner: ti.template(), unknown: ti.template(), r, i, j, i2, j2, 
     """Length over the owned sides' count (at least 1) of the face between (i, j)
     and (i2, j2); 0 if (i2, j2) is off the grid or no unknown."""
     nx, ny = owner.shape[1], owner.shape[2]
-    w = ti.f64(0.0)
+    w = ti.cast(0.0, REAL.dtype)
     if 0 <= i2 < nx and 0 <= j2 < ny:
         if unknown[r, i2, j2] != 0:
             # length / max(count, 1), without a division: halving is exact
@@ -84,13 +84,13 @@ def _near_body(owner: ti.template(), r, i, j):
 def _cell_velocity(terms: ti.template(), r, i, j, dx, dy):
     """``v + omega z x r_c`` of the body owning (i, j) in the generalized
     velocities ``z``; 0 in a cell no body owns."""
-    v = ti.Vector([0.0, 0.0], dt=ti.f64)
+    v = ti.Vector([0.0, 0.0], dt=REAL.dtype)
     o = terms.owner[r, i, j]
     if o >= 0:
         rx = (i - terms.body[r, o, _CX]) * dx
         ry = (j - terms.body[r, o, _CY]) * dy
-        z = ti.Vector([terms.body[r, o, _Z + m] for m in ti.static(range(3))], dt=ti.f64)
-        v = ti.Vector([z[0] - z[2] * ry, z[1] + z[2] * rx], dt=ti.f64)
+        z = ti.Vector([terms.body[r, o, _Z + m] for m in ti.static(range(3))], dt=REAL.dtype)
+        v = ti.Vector([z[0] - z[2] * ry, z[1] + z[2] * rx], dt=REAL.dtype)
     return v
 
 
@@ -107,17 +107,17 @@ def _gather(cg: ti.template(), src, owner: ti.template(), unknown: ti.template()
             body: ti.template(), box: ti.template(), geo: ti.template(), dx, dy, r, o):
     """:func:`_gather_body` on the members of its pack (Taichi cannot alias them)."""
     ny = geo[0, _NY]
-    gx_sum = ti.f64(0.0)
-    gy_sum = ti.f64(0.0)
-    tau = ti.f64(0.0)
+    gx_sum = ti.cast(0.0, REAL.dtype)
+    gy_sum = ti.cast(0.0, REAL.dtype)
+    tau = ti.cast(0.0, REAL.dtype)
     for i in range(box[r, o, 0], box[r, o, 1] + 1):
         for j in range(box[r, o, 2], box[r, o, 3] + 1):
             if owner[r, i, j] == o and unknown[r, i, j] != 0:
                 k = _index(geo, 0, r, i, j)
                 s = ny + 1
                 d = cg[src, k]
-                gx = ti.f64(0.0)
-                gy = ti.f64(0.0)
+                gx = ti.cast(0.0, REAL.dtype)
+                gy = ti.cast(0.0, REAL.dtype)
                 w = _face_weight(owner, unknown, r, i, j, i + 1, j, dy)
                 if w > 0:
                     gx += (cg[src, k + s] - d) * w
@@ -146,7 +146,7 @@ def _spread_cell(cg: ti.template(), base, terms: ti.template(), geo: ti.template
     """``cg[base] + (S z)`` at cell (i, j) of realization r (``base < 0``:
     ``S z``): the carried flux into the cell, net."""
     k = _index(geo, 0, r, i, j)
-    val = ti.f64(0.0)
+    val = ti.cast(0.0, REAL.dtype)
     if terms.unknown[r, i, j] != 0 and _near_body(terms.owner, r, i, j):
         here = _cell_velocity(terms, r, i, j, dx, dy)
         for di, dj, comp, sign in ti.static(((-1, 0, 0, 1.0), (1, 0, 0, -1.0),
@@ -170,10 +170,11 @@ def _set_z(body: ti.template(), r, o):
 
 
 @ti.func
-def _product_of(cg: ti.template(), src, dst, terms: ti.template(), geo: ti.template(), dx, dy,
-                r):
+def _product_of(cg: ti.template(), src, dst, terms: ti.template(), geo: ti.template(),
+                consts: ti.template(), r):
     """``cg[dst] = S (H M) S^T cg[src]`` of realization r, at every cell, serially
     (in the thread that runs the realization's whole solve)."""
+    dx, dy = consts[_K_DX], consts[_K_DY]
     for o in range(terms.body.shape[1]):
         _gather_body(cg, src, terms, geo, dx, dy, r, o)
         _set_z(terms.body, r, o)
@@ -185,7 +186,7 @@ def _product_of(cg: ti.template(), src, dst, terms: ti.template(), geo: ti.templ
 
 @ti.func
 def _product(cg: ti.template(), src, dst, flags: ti.template(), running, terms: ti.template(),
-             geo: ti.template(), dx, dy):
+             geo: ti.template(), consts: ti.template()):
     """``cg[dst] = S (H M) S^T cg[src]`` of every running realization (flag
     ``running`` of ``flags``), in two top-level loops: a thread per body, then a
     thread per grid column. Each body's sum runs over its own cells in cell order and
@@ -193,12 +194,13 @@ def _product(cg: ti.template(), src, dst, flags: ti.template(), running, terms: 
     R, N = terms.body.shape[0], terms.body.shape[1]
     for r, o in ti.ndrange(R, N):
         if flags[r, running]:
-            _gather_body(cg, src, terms, geo, dx, dy, r, o)
+            _gather_body(cg, src, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
             _set_z(terms.body, r, o)
     nx, ny = geo[0, _NX], geo[0, _NY]
     for t in range(R * nx):  # a thread per grid column: a third faster than per cell
         r, i = t // nx, t % nx
         if flags[r, running]:
+            dx, dy = consts[_K_DX], consts[_K_DY]
             for j in range(ny):
                 cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, terms, geo, dx, dy,
                                                                 r, i, j)
@@ -206,7 +208,7 @@ def _product(cg: ti.template(), src, dst, flags: ti.template(), running, terms: 
 
 @ti.kernel
 def _body_rhs(cg: _Rows, terms: Terms, centre: _Field, mobility: _Field, drift: _Field,
-              geo: _Ints, dx: ti.f64, dy: ti.f64):
+              geo: _Ints, consts: _Consts):
     """``terms.body``'s centre and ``H M`` columns from ``centre`` and ``mobility``;
     each body's box of cells (the smallest holding the cells it owns; empty if
     none); then ``RHS = BASE + S (q + (H M) S^T SOL)``, SOL being the initial
@@ -214,14 +216,14 @@ def _body_rhs(cg: _Rows, terms: Terms, centre: _Field, mobility: _Field, drift: 
     _load_terms(terms.owner, terms.body, terms.box, centre, mobility, geo)
     R, N = terms.body.shape[0], terms.body.shape[1]
     for r, o in ti.ndrange(R, N):
-        _gather_body(cg, _SOL, terms, geo, dx, dy, r, o)
+        _gather_body(cg, _SOL, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
         for m in ti.static(range(3)):
             terms.body[r, o, _Z + m] = (drift[r, o, m]
                                         + terms.body[r, o, _MOB + m] * terms.body[r, o, _Y + m])
     nx, ny = geo[0, _NX], geo[0, _NY]
     for r, i, j in ti.ndrange(R, nx, ny):
-        cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(cg, _BASE, terms, geo, dx, dy, r, i,
-                                                         j)
+        cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(cg, _BASE, terms, geo, consts[_K_DX],
+                                                         consts[_K_DY], r, i, j)
 
 
 @ti.func

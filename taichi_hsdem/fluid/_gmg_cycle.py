@@ -47,13 +47,18 @@ _TX, _TY = 0, 1
 _X, _B = 0, 1
 # Rows of the fine-level CG array: solution (p - p_ref), search direction,
 # A times it, right-hand side, the part of it that depends on kappa only, and
-# the moving bodies' term of the operator applied to a vector (_gmg_bodies).
-_SOL, _DIR, _ADIR, _RHS, _BASE, _PW = range(6)
+# the moving bodies' term of the operator applied to a vector (_gmg_bodies), and
+# the initial guess kept while a solve may have to start again (gmg.solve).
+_SOL, _DIR, _ADIR, _RHS, _BASE, _PW, _KEEP = range(7)
+CG_ROWS = 7
 # Columns of the level table.
 _OFF, _NX, _NY = 0, 1, 2
 # Per-realization integers: still iterating, iterations done, no driving at all
-# (b = 0), and the permeability scan's counts of changed, zero and invalid cells.
-_RUNNING, _ITERS, _UNDRIVEN, _CHANGED, _ZEROS, _BAD = range(6)
+# (b = 0), the permeability scan's counts of changed, zero and invalid cells, and
+# the CG's own: stopped at the last step, its true residual to be checked; and the
+# next search direction starts afresh (beta = 0).
+_RUNNING, _ITERS, _UNDRIVEN, _CHANGED, _ZEROS, _BAD, _CHECK, _FIRST = range(8)
+N_FLAGS = 8
 # Per-realization floats: r.z, |b|^2, |r|^2, CG step and direction coefficients,
 # the inlet's total permeability (flow_rate), the final relative residual.
 _RZ, _BB, _RR, _ALPHA, _BETA, _INLET, _RES = range(7)
@@ -80,15 +85,40 @@ _SEGMENT = 64
 # Left, right, bottom, top: the box sides in the order of fluid._SIDES.
 _SIDE_NAMES = ("left", "right", "bottom", "top")
 
-_vec2 = ti.types.vector(2, ti.f64)
-_Ops = ti.types.ndarray(dtype=_vec2, ndim=1)
-_Sides = ti.types.ndarray(dtype=_vec2, ndim=2)
-_Rows = ti.types.ndarray(dtype=ti.f64, ndim=2)
+# Constants of a solver, in one array of its float type (``consts``): the float
+# scalars travel there, not as kernel arguments, whose types are fixed when a
+# kernel is defined. The squared tolerance, the cell sizes, p_ref, the flow-rate
+# inflow and the face conductance factors dy / (dx eta), dx / (dy eta).
+_K_TOL2, _K_DX, _K_DY, _K_PREF, _K_INFLOW, _K_GX, _K_GY = range(7)
+N_CONSTS = 7
+
+
+class _Real:
+    """The solve's float type (float64, or float32 where the backend has no
+    float64: backend.solve_real), read by the kernels below when they compile.
+    Every kernel takes an array of that type, so Taichi compiles it anew for
+    each type and the two never meet."""
+    dtype = ti.f64
+
+
+REAL = _Real()
+
+
+def vec2(real):
+    """The operator's element type: (Tx, Ty) in ``real``."""
+    return ti.types.vector(2, real)
+
+
+# Float arrays take the solver's type (any float type: compiled per type).
+_Ops = ti.types.ndarray(ndim=1)
+_Sides = ti.types.ndarray(ndim=2)
+_Rows = ti.types.ndarray(ndim=2)
 _Ints = ti.types.ndarray(dtype=ti.i32, ndim=2)
 _Cells = ti.types.ndarray(dtype=ti.i8, ndim=3)
 _Mask = ti.types.ndarray(dtype=ti.i8, ndim=2)
-_Chol = ti.types.ndarray(dtype=ti.f64, ndim=3)
-_Field = ti.types.ndarray(dtype=ti.f64, ndim=3)
+_Chol = ti.types.ndarray(ndim=3)
+_Field = ti.types.ndarray(ndim=3)
+_Consts = ti.types.ndarray(ndim=1)
 _Grid = ti.types.ndarray(ndim=3)     # any float type: the simulation's kappa
 _Vectors = ti.types.ndarray(ndim=4)  # (R, nx, ny, 2), any float type
 
@@ -133,7 +163,7 @@ def _relax(op: ti.template(), mg: ti.template(), k, s, reads, alpha, parents):
     the corrected field is never stored.
     """
     d = _diagonal(op, k, s)
-    x = ti.f64(0.0)
+    x = ti.cast(0.0, REAL.dtype)
     if d > 0:
         v = mg[_B, k]
         if reads == _STORED:
@@ -229,7 +259,7 @@ def _restrict_row(op: ti.template(), mg: ti.template(), geo: ti.template(), l, r
     west = _index(geo, l, r, 2 * I, 0)
     coarse = _index(geo, l + 1, r, I, 0)
     for J in range(J0, J1):
-        v = ti.f64(0.0)
+        v = ti.cast(0.0, REAL.dtype)
         for a in ti.static((0, 1)):
             if 2 * I + a < nx and 2 * J + a < ny:
                 k = west + a * (s + 1) + 2 * J
@@ -249,7 +279,7 @@ def _coarsen_entry(op: ti.template(), geo: ti.template(), l, r, I, J):
     and 2 I + 3 (held by the fine ghosts below them).
     """
     nx, ny, my = geo[l, _NX], geo[l, _NY], geo[l + 1, _NY]
-    c = ti.Vector([0.0, 0.0], dt=ti.f64)
+    c = ti.Vector([0.0, 0.0], dt=REAL.dtype)
     if J < my:
         fi = -1 if I < 0 else ti.min(2 * I + 1, nx - 1)
         fj = ti.min(2 * J + 1, ny - 1)
@@ -298,17 +328,36 @@ def _lanes(n):
 
 @ti.func
 def _harmonic(k1, k2):
-    h = ti.f64(0.0)
+    h = ti.cast(0.0, REAL.dtype)
     if k1 + k2 > 0:
         h = 2.0 * k1 * k2 / (k1 + k2)
     return h
 
 
+def _wide(v) -> bool:
+    """(at compile time) whether the Taichi expression ``v`` is float64."""
+    return ti.lang.expr.Expr(v).ptr.get_rvalue_type() == ti.f64
+
+
+@ti.func
+def _bits(v):
+    """The bit pattern of float ``v`` as an integer of its width."""
+    if ti.static(_wide(v)):
+        return ti.bit_cast(v, ti.i64)
+    else:
+        return ti.bit_cast(v, ti.i32)
+
+
 @ti.func
 def _is_finite(v):
-    """Bit test, immune to fast-math's assumption that no value is NaN or inf."""
-    exponent = ti.i64(0x7FF)
-    return ((ti.bit_cast(v, ti.i64) >> ti.i64(52)) & exponent) != exponent
+    """Bit test, immune to a compiler's assumption that no value is NaN or inf."""
+    finite = True
+    if ti.static(_wide(v)):
+        exponent = ti.i64(0x7FF)
+        finite = ((ti.bit_cast(v, ti.i64) >> ti.i64(52)) & exponent) != exponent
+    else:
+        finite = ((ti.bit_cast(v, ti.i32) >> 23) & 0xFF) != 0xFF
+    return finite
 
 
 # ---------------------------------------------------------------- set-up kernels
@@ -325,12 +374,12 @@ def _scan(kappa: _Grid, seen: _Rows, connected: _Mask, flags: _Ints):
         changed, zeros, bad = 0, 0, 0
         for j in range(ny):
             if connected[i, j] != 0:
-                k = ti.cast(kappa[r, i, j], ti.f64)
+                k = ti.cast(kappa[r, i, j], REAL.dtype)
                 if not (_is_finite(k) and k >= 0):
                     bad += 1
                 elif k == 0:
                     zeros += 1
-                if ti.bit_cast(k, ti.i64) != ti.bit_cast(seen[r, i * ny + j], ti.i64):
+                if _bits(k) != _bits(seen[r, i * ny + j]):
                     changed += 1
                 seen[r, i * ny + j] = k
         flags[r, _CHANGED] += changed  # integer sums: exact in any order
@@ -340,46 +389,48 @@ def _scan(kappa: _Grid, seen: _Rows, connected: _Mask, flags: _Ints):
 
 @ti.kernel
 def _assemble(kappa: _Grid, unknown: _Cells, sides: _Sides, op: _Ops, cg: _Rows,
-              state: _Rows, geo: _Ints, gx: ti.f64, gy: ti.f64, inflow: ti.f64):
+              state: _Rows, geo: _Ints, consts: _Consts):
     """Fine-level operator and the kappa-dependent right-hand side.
 
-    ``gx = dy / (dx eta)``, ``gy = dx / (dy eta)``; ``sides[s, m] = (g, v)``: the
+    ``consts``: ``gx = dy / (dx eta)``, ``gy = dx / (dy eta)``, the inflow;
+    ``sides[s, m] = (g, v)``: the
     Dirichlet conductance per unit permeability of box side ``s`` at position
     ``m`` (0: wall) and its value minus ``p_ref``. The ``flow_rate`` inflow goes to
     the inlet cells in proportion to kappa. Cells that are no unknown get 0.
     """
     R, nx, ny = kappa.shape[0], kappa.shape[1], kappa.shape[2]
     for r in range(R):
-        total = ti.f64(0.0)
+        total = ti.cast(0.0, REAL.dtype)
         for j in range(ny):
             if unknown[r, 0, j] != 0:
-                total += ti.cast(kappa[r, 0, j], ti.f64)
+                total += ti.cast(kappa[r, 0, j], REAL.dtype)
         state[r, _INLET] = total
     for t in range(R * (nx + 1)):
         r, i = t // (nx + 1), t % (nx + 1) - 1  # i = -1: the west ghost column
+        gx, gy, inflow = consts[_K_GX], consts[_K_GY], consts[_K_INFLOW]
         for j in range(ny + 1):
-            c = ti.Vector([0.0, 0.0], dt=ti.f64)
-            base = ti.f64(0.0)
+            c = ti.Vector([0.0, 0.0], dt=REAL.dtype)
+            base = ti.cast(0.0, REAL.dtype)
             if j == ny:  # the ghost below column i + 1: its bottom Dirichlet face
                 if i + 1 < nx:  # noqa: SIM102 - Taichi's `and` does not short-circuit
                     if unknown[r, i + 1, 0] != 0:
-                        c[_TY] = sides[2, i + 1][0] * ti.cast(kappa[r, i + 1, 0], ti.f64)
+                        c[_TY] = sides[2, i + 1][0] * ti.cast(kappa[r, i + 1, 0], REAL.dtype)
             elif i < 0:  # the west ghost: the left Dirichlet face of cell (0, j)
                 if unknown[r, 0, j] != 0:
-                    c[_TX] = sides[0, j][0] * ti.cast(kappa[r, 0, j], ti.f64)
+                    c[_TX] = sides[0, j][0] * ti.cast(kappa[r, 0, j], REAL.dtype)
             elif unknown[r, i, j] != 0:
-                k = ti.cast(kappa[r, i, j], ti.f64)
+                k = ti.cast(kappa[r, i, j], REAL.dtype)
                 c[_TX] = sides[1, j][0] * k  # on the last column, its right face
                 if i + 1 < nx:
                     c[_TX] = 0.0
                     if unknown[r, i + 1, j] != 0:
-                        c[_TX] = gx * _harmonic(k, ti.cast(kappa[r, i + 1, j], ti.f64))
+                        c[_TX] = gx * _harmonic(k, ti.cast(kappa[r, i + 1, j], REAL.dtype))
                 c[_TY] = sides[3, i][0] * k  # on the top row, its top face
                 if j + 1 < ny:
                     c[_TY] = 0.0
                     if unknown[r, i, j + 1] != 0:
-                        c[_TY] = gy * _harmonic(k, ti.cast(kappa[r, i, j + 1], ti.f64))
-                gv = ti.f64(0.0)
+                        c[_TY] = gy * _harmonic(k, ti.cast(kappa[r, i, j + 1], REAL.dtype))
+                gv = ti.cast(0.0, REAL.dtype)
                 for side in ti.static(range(4)):
                     on_side = (i == 0, i == nx - 1, j == 0, j == ny - 1)[side]
                     m = (j, j, i, i)[side]
@@ -452,9 +503,9 @@ def _copy_rhs(cg: _Rows, geo: _Ints, R: ti.i32):
 @ti.func
 def _occupied(carried: ti.template(), occupied: ti.template(), r, i, j, given: ti.template()):
     """1 in a cell inside a particle (``occupied``, or else ``carried != 0``), else 0."""
-    chi = ti.f64(0.0)
+    chi = ti.cast(0.0, REAL.dtype)
     if ti.static(given):
-        chi = ti.f64(1.0) if occupied[r, i, j] != 0 else ti.f64(0.0)
+        chi = ti.cast(1.0, REAL.dtype) if occupied[r, i, j] != 0 else ti.cast(0.0, REAL.dtype)
     else:
         if carried[r, i, j, 0] != 0 or carried[r, i, j, 1] != 0:
             chi = 1.0
@@ -463,8 +514,7 @@ def _occupied(carried: ti.template(), occupied: ti.template(), r, i, j, given: t
 
 @ti.kernel
 def _set_carried_rhs(cg: _Rows, carried: _Vectors, occupied: _Grid, connected: _Mask,
-                     unknown: _Cells, geo: _Ints, dx: ti.f64, dy: ti.f64,
-                     given: ti.template()):
+                     unknown: _Cells, geo: _Ints, consts: _Consts, given: ti.template()):
     """Right-hand side with the particles' carried flux (fluid.PressureSolver.solve):
     each face between two connected cells carries the mean of ``chi v`` over its
     occupied sides (``given``: ``occupied``; else cells where ``carried != 0``),
@@ -472,11 +522,12 @@ def _set_carried_rhs(cg: _Rows, carried: _Vectors, occupied: _Grid, connected: _
     R, nx, ny = carried.shape[0], carried.shape[1], carried.shape[2]
     for t in range(R * nx):
         r, i = t // nx, t % nx
+        dx, dy = consts[_K_DX], consts[_K_DY]
         for j in range(ny):
             k = _index(geo, 0, r, i, j)
-            rhs = ti.f64(0.0)
+            rhs = ti.cast(0.0, REAL.dtype)
             if unknown[r, i, j] != 0:
-                inward, outward = ti.f64(0.0), ti.f64(0.0)
+                inward, outward = ti.cast(0.0, REAL.dtype), ti.cast(0.0, REAL.dtype)
                 # west, south (into the cell), east, north (out of it)
                 for di, dj, comp, length, sign in ti.static(
                         ((-1, 0, 0, 0, 1), (0, -1, 1, 1, 1), (1, 0, 0, 0, -1), (0, 1, 1, 1, -1))):
@@ -485,8 +536,8 @@ def _set_carried_rhs(cg: _Rows, carried: _Vectors, occupied: _Grid, connected: _
                         if connected[i2, j2] != 0:
                             chi = (_occupied(carried, occupied, r, i, j, given)
                                    + _occupied(carried, occupied, r, i2, j2, given))
-                            v = (ti.cast(carried[r, i, j, comp], ti.f64)
-                                 + ti.cast(carried[r, i2, j2, comp], ti.f64))
+                            v = (ti.cast(carried[r, i, j, comp], REAL.dtype)
+                                 + ti.cast(carried[r, i2, j2, comp], REAL.dtype))
                             q = v / ti.max(chi, 1.0) * (dy, dx)[length]
                             if ti.static(sign == 1):
                                 inward += q
@@ -497,13 +548,13 @@ def _set_carried_rhs(cg: _Rows, carried: _Vectors, occupied: _Grid, connected: _
 
 
 @ti.kernel
-def _load_guess(x0: _Grid, unknown: _Cells, cg: _Rows, geo: _Ints, p_ref: ti.f64):
+def _load_guess(x0: _Grid, unknown: _Cells, cg: _Rows, geo: _Ints, consts: _Consts):
     """The initial guess ``x0 - p_ref``, 0 where that is not finite or no unknown."""
     R, nx, ny = x0.shape[0], x0.shape[1], x0.shape[2]
     for t in range(R * nx):
         r, i = t // nx, t % nx
         for j in range(ny):
-            v = ti.cast(x0[r, i, j], ti.f64) - p_ref
+            v = ti.cast(x0[r, i, j], REAL.dtype) - consts[_K_PREF]
             if not (unknown[r, i, j] != 0 and _is_finite(v)):
                 v = 0.0
             cg[_SOL, _index(geo, 0, r, i, j)] = v
@@ -525,8 +576,10 @@ def _sweep(h, post):
 
 @ti.kernel
 def _smooth(op: _Ops, mg: _Rows, geo: _Ints, flags: _Ints, l: ti.i32, h: ti.i32,
-            post: ti.i32, alpha: ti.f64, cells: ti.template()):
-    """Half-sweep h (see _sweep) of level l, in parallel over column segments (or cells)."""
+            post: ti.i32, cells: ti.template()):
+    """Half-sweep h (see _sweep) of level l, in parallel over column segments (or
+    cells); the coarse correction (post-smoothing) scaled by OVERCORRECTION."""
+    alpha = OVERCORRECTION
     R, nx, ny = flags.shape[0], geo[l, _NX], geo[l, _NY]
     colour, reads = _sweep(h, post)
     if ti.static(cells):
@@ -591,9 +644,9 @@ def _cycle_of(op: ti.template(), mg: ti.template(), chol: ti.template(), geo: ti
 
 @ti.kernel
 def _serial_cycle(op: _Ops, mg: _Rows, chol: _Chol, geo: _Ints, flags: _Ints,
-                  l0: ti.i32, alpha: ti.f64):
+                  l0: ti.i32):
     """The V-cycle from level l0 down, one thread per running realization."""
     for t in range(flags.shape[0] * _TASK):
         r = t // _TASK
         if t % _TASK == 0 and flags[r, _RUNNING]:
-            _cycle_of(op, mg, chol, geo, r, l0, alpha)
+            _cycle_of(op, mg, chol, geo, r, l0, OVERCORRECTION)

@@ -4,8 +4,10 @@
 :class:`taichi_hsdem.fluid.PressureSolver` (docs/model.md section 2: cell-centred
 two-point fluxes with the harmonic mean, Dirichlet faces half a cell away, walls
 passing no flux) for all ``R`` realizations at once, without assembling a matrix,
-in float64 whatever the simulation's precision, on the Taichi backend in use: on
-a GPU the fields stay on the device.
+in float64 whatever the simulation's precision wherever the backend has float64
+kernels (in float32 elsewhere: Metal, GLES; see F32_TOL_FLOOR), on the Taichi
+backend in use: on a GPU the fields stay on the device, and the host reads one
+report per solve.
 
 Method
 ------
@@ -38,7 +40,8 @@ positive definite and the coarse part semi-definite), so CG remains valid.
 residual ``|b - A p| / |b|`` meets ``tol``; a converged realization is frozen
 (every kernel skips it) while the others go on. The recursively updated
 residual decides the stop; the true residual is then recomputed, and CG restarted
-from there if rounding had made them differ by more than ``tol``.
+from there if rounding had made them differ by more than ``tol`` (in float32 it
+also stops once that residual is round-off: _gmg_cg._after_check).
 
 *Moving bodies* (``solve(..., bodies=BodyTerms(...))``, the implicit carried
 volume): the operator gains ``S (H M) S^T``, one symmetric positive
@@ -66,8 +69,13 @@ no branches and no realization reads another's entries.
 one kernel launch. ``rows``: every loop over a grid in parallel over segments of
 its columns, the levels of at most ``SERIAL_CELLS`` cells cycled one realization
 per thread.
-``cells``: in parallel over cells (the GPU default). Dot products are summed the
-same way in all three.
+``cells``: in parallel over cells (the default on every GPU). Dot products are
+summed the same way in all three, and the three give the same bits.
+
+*Host reads.* One per solve: the report (_gmg_cg._report) after the CG. On a GPU
+the CG runs as many iterations as the last solve took before that read, then a
+quarter as many at a time (_iterate); the permeability scan is read with the
+report unless some realization had cut-off cells at the last solve (solve).
 
 Examples
 --------
@@ -88,17 +96,31 @@ from typing import NamedTuple
 import numpy as np
 from scipy import ndimage
 
-from ..backend import BackendError, ti
+from .. import backend
+from ..backend import ti
 from .solver import FluxImbalanceError, SolveInfo
 from .system import FiniteVolumeSystem
 from ._gmg_bodies import BODY_COLUMNS, Terms, _body_rhs
-from ._gmg_cg import (_boundary_fluxes, _cg_direction, _cg_step, _pressure, _residual_check,
-                      _solve_each)
-from ._gmg_cycle import (COARSEST_CELLS, MAXITER, OVERCORRECTION, REALIZATION_CELLS,
-                         SERIAL_CELLS, SWEEPS, _BAD, _BB, _CHANGED, _ITERS, _PARALLEL, _RES, _SOL,
-                         _SEGMENT, _SIDE_NAMES, _ZEROS, _assemble, _coarsen, _copy_rhs,
-                         _factor, _load_guess, _restrict, _scan, _serial_cycle,
-                         _set_carried_rhs, _smooth, _vec2)
+from ._gmg_cg import (REPORT_COLUMNS, _REPORT_ACTIVE, _REPORT_FLAGS, _REPORT_FLUXES,
+                      _boundary_fluxes, _cg_direction, _cg_step, _check_stopped, _copy_row,
+                      _pressure, _report, _residual_check, _solve_each)
+from ._gmg_cycle import (CG_ROWS, COARSEST_CELLS, MAXITER, N_CONSTS, N_FLAGS, REAL,
+                         REALIZATION_CELLS, SERIAL_CELLS, SWEEPS, _BAD, _BB, _CHANGED, _ITERS,
+                         _K_DX, _K_DY, _K_GX, _K_GY, _K_INFLOW, _K_PREF, _K_TOL2, _KEEP,
+                         _PARALLEL, _RES, _SOL, _SEGMENT, _SIDE_NAMES, _ZEROS, _assemble,
+                         _coarsen, _copy_rhs, _factor, _load_guess, _restrict, _scan,
+                         _serial_cycle, _set_carried_rhs, _smooth, vec2)
+
+# The float32 solve (a backend without float64 kernels: Metal, most integrated
+# GPUs): its tolerance is at least F32_TOL_FLOOR, it also stops where its residual
+# is round-off (_gmg_cg.F32_OPERATOR_FLOOR), and its inflow and outflow need only
+# balance to F32_FLUX_FLOOR of the larger flux. Measured (Kozeny-Carman contrast
+# 1/60, a quarter of the cells covered, tol 1e-6): the pressure within 7e-6, 5e-5
+# and 9e-5 of float64's (pressure inlet; 7e-5 to 1e-3 with a flow-rate inlet) and the
+# fluxes balanced to 1.7e-5, 4.7e-4 and 1.6e-3 on grids of 1.1e4, 1.7e5 and 1.1e6
+# cells, in 9-19 iterations (tests/test_gmg_f32.py).
+F32_TOL_FLOOR = 1e-6
+F32_FLUX_FLOOR = 5e-3
 
 # ---------------------------------------------------------------- the solver
 class BodyTerms(NamedTuple):
@@ -111,13 +133,13 @@ class BodyTerms(NamedTuple):
     ----------
     owner : int32 (R, nx, ny)
         The body whose outline holds each cell's centre, -1 for none.
-    centre : float64 (R, N, 2)
+    centre : (R, N, 2), the solve's float type (float64 where the backend has it)
         Each body's centre in cell units: cell ``(i, j)``'s centre is at ``(i, j)``.
-    mobility : float64 (R, N, 3)
+    mobility : (R, N, 3)
         ``H M``: over the next fluid interval the body moves at ``drift -
         mobility S^T (p - p_0)`` (``v_x, v_y, omega``; 0 for a body out of play),
         ``p_0`` the initial guess.
-    drift : float64 (R, N, 3)
+    drift : (R, N, 3)
         That velocity at ``p = p_0``.
     """
 
@@ -149,8 +171,11 @@ class TaichiPressureSolver:
         small grids on the CPU); a column segment in each grid-sized loop (``rows``:
         cheap index arithmetic, for large grids on the CPU); or a cell (``cells``:
         enough threads for a GPU). ``auto`` picks by backend and grid size
-        (:meth:`_choose_parallel`). Each is bit-reproducible, but they differ
-        from one another in the last bits.
+        (:meth:`_choose_parallel`). The three give the same bits (fast math off).
+    real : {None, "f64", "f32"}
+        The solve's float type: None, float64 where the backend has it, else
+        float32 (:func:`taichi_hsdem.backend.solve_real`), whose tolerance is at
+        least ``F32_TOL_FLOOR`` and its flux check ``F32_FLUX_FLOOR``.
 
     Notes
     -----
@@ -162,7 +187,7 @@ class TaichiPressureSolver:
     *Device arrays.* ``kappa`` (and ``x0``, ``carried``, ``occupied``) may be
     Taichi ndarrays of shape ``(R, nx, ny)`` (``(R, nx, ny, 2)``) of any float
     type, e.g. the simulation's own; ``solve(..., host=False)`` returns the
-    pressure as this solver's float64 ndarray ``(R, nx, ny)`` instead of a copy
+    pressure as this solver's ndarray ``(R, nx, ny)`` instead of a copy
     on the host. Only the per-realization numbers (fluxes, residuals, iteration
     counts) then cross to the host.
 
@@ -196,18 +221,22 @@ class TaichiPressureSolver:
     velocity = FiniteVolumeSystem.velocity
 
     def __init__(self, active, dx, dy, viscosity, bc, n_batch=1, tol=1e-8, gap=None,
-                 workers=1, pool_after=None, full_every=None, *, parallel="auto"):
+                 workers=1, pool_after=None, full_every=None, *, parallel="auto", real=None):
         t_start = time.perf_counter()
         self._set_grid(active, dx, dy, viscosity, n_batch)
         if not 0 < tol < 1:
             raise ValueError(f"tol must lie in (0, 1), got {tol}")
         if parallel not in ("auto", *_PARALLEL):
             raise ValueError(f"parallel must be 'auto' or one of {_PARALLEL}, got {parallel!r}")
-        arch = ti.lang.impl.current_cfg().arch
-        if arch not in (ti.x64, ti.arm64, ti.cuda):
-            raise BackendError(f"TaichiPressureSolver solves in float64, which Taichi's {arch.name} "
-                               "backend lacks; use fluid.PressureSolver there")
-        self.tol = float(tol)
+        if real not in (None, "f64", "f32"):
+            raise ValueError(f"real must be None, 'f64' or 'f32', got {real!r}")
+        self.real = ({"f64": ti.f64, "f32": ti.f32}[real] if real is not None
+                     else backend.solve_real())
+        self._np_real = np.float64 if self.real == ti.f64 else np.float32
+        self.requested_tol = float(tol)
+        # float32 cannot go below its floors (module constants)
+        self.tol = float(tol) if self.real == ti.f64 else max(float(tol), F32_TOL_FLOOR)
+        self.flux_floor = 1e-6 if self.real == ti.f64 else F32_FLUX_FLOOR
         self._parse_bc(bc, gap)
         self._sides = self._side_table()
         self.connected, joined = self._anchored(self.active)
@@ -227,13 +256,11 @@ class TaichiPressureSolver:
 
     # ------------------------------------------------------------------ set-up
     def _choose_parallel(self):
-        """``cells`` on a CUDA GPU; on the CPU ``realizations`` for grids of at most
-        REALIZATION_CELLS cells, else ``rows``. The choice depends on neither the
-        batch size nor the thread count: the three ways differ in rounding
-        (Taichi compiles with fast math, which may reorder a sum differently in
-        different kernels), and a realization must get the same bits alone and
-        in a batch."""
-        if ti.lang.impl.current_cfg().arch == ti.cuda:
+        """``cells`` on a GPU (any backend but the CPU's); on the CPU
+        ``realizations`` for grids of at most REALIZATION_CELLS cells, else
+        ``rows``. The choice depends on neither the batch size nor the thread
+        count, so that a realization gets the same work alone and in a batch."""
+        if ti.lang.impl.current_cfg().arch not in (ti.x64, ti.arm64):
             return "cells"
         return "realizations" if self.shape[0] * self.shape[1] <= REALIZATION_CELLS else "rows"
 
@@ -291,30 +318,39 @@ class TaichiPressureSolver:
         nx, ny = self.shape
         fine = sizes[0]
         self._geo = _upload(geo, ti.i32)
-        self._op = ti.ndarray(_vec2, (int(offsets[-1]),))
-        self._mg = ti.ndarray(ti.f64, (2, int(offsets[-1])))
-        self._cg = ti.ndarray(ti.f64, (6, fine))
+        real = self.real
+        self._op = ti.ndarray(vec2(real), (int(offsets[-1]),))
+        self._mg = ti.ndarray(real, (2, int(offsets[-1])))
+        self._cg = ti.ndarray(real, (CG_ROWS, fine))
         segments = (ny + _SEGMENT - 1) // _SEGMENT
-        self._part = ti.ndarray(ti.f64, (2, R * nx * segments))  # the segment sums
-        self._state = ti.ndarray(ti.f64, (R, 7))
-        self._flags = ti.ndarray(ti.i32, (R, 6))
+        self._part = ti.ndarray(real, (2, R * nx * segments))  # the segment sums
+        self._state = ti.ndarray(real, (R, 7))
+        self._flags = ti.ndarray(ti.i32, (R, N_FLAGS))
+        self._report = ti.ndarray(real, (R, REPORT_COLUMNS))
         cm = levels[-1][0] * levels[-1][1]
-        self._chol = ti.ndarray(ti.f64, (R, cm, cm))
-        self._sides_dev = _upload(self._sides, ti.f64, _vec2)
+        self._chol = ti.ndarray(real, (R, cm, cm))
+        self._sides_dev = _upload(self._sides, real, vec2(real))
+        self._consts = ti.ndarray(real, (N_CONSTS,))
+        consts = np.zeros(N_CONSTS)
+        consts[[_K_TOL2, _K_DX, _K_DY, _K_PREF, _K_INFLOW, _K_GX, _K_GY]] = (
+            self.tol**2, self.dx, self.dy, self.p_ref, self.inflow,
+            self.dy / (self.dx * self.viscosity), self.dx / (self.dy * self.viscosity))
+        self._consts.from_numpy(consts.astype(self._np_real))
+        self._last_iterations = None   # of the last solve (how far to run unread, _iterate)
         self._connected_dev = _upload(self.connected, ti.i8)
         self._unknown_host = np.broadcast_to(self.connected, (R, nx, ny)).copy()
         self._unknown = _upload(self._unknown_host, ti.i8)
-        self._seen = _upload(np.full((R, nx * ny), np.nan), ti.f64)
-        self._kappa_in = ti.ndarray(ti.f64, (R, nx, ny))  # a host kappa lands here
+        self._seen = _upload(np.full((R, nx * ny), np.nan), real)
+        self._kappa_in = ti.ndarray(real, (R, nx, ny))  # a host kappa lands here
         self._inputs = {}  # device copies of the other host inputs, made on first use
-        self._out = ti.ndarray(ti.f64, (R, nx, ny))
-        self._fluxes = ti.ndarray(ti.f64, (R, 2))
+        self._out = ti.ndarray(real, (R, nx, ny))
+        self._fluxes = ti.ndarray(real, (R, 2))
         self._blocked = np.zeros(R, dtype=bool)
         self._had_zeros = np.zeros(R, dtype=bool)  # zero kappa at the last change
         # stand-ins for the bodies' arrays in solves without them (never read)
         self._no_bodies = Terms(owner=_upload(np.full((1, 1, 1), -1), ti.i32),
                                 unknown=self._unknown,
-                                body=_upload(np.zeros((1, 1, BODY_COLUMNS)), ti.f64),
+                                body=_upload(np.zeros((1, 1, BODY_COLUMNS)), real),
                                 box=_upload(np.full((1, 1, 4), -1), ti.i32))
         self._bodies = None                        # those of the solve under way
         self._terms = None   # their pack (Terms), kept while the same arrays come
@@ -326,7 +362,7 @@ class TaichiPressureSolver:
         As :meth:`taichi_hsdem.fluid.PressureSolver.solve`, which see; in
         addition the inputs may be Taichi ndarrays (class Notes), and with
         ``host=False`` the pressure is returned as this solver's device ndarray
-        ``(R, nx, ny)`` of float64 (overwritten by the next solve). With
+        ``(R, nx, ny)`` of its float type (overwritten by the next solve). With
         ``bodies`` (:class:`BodyTerms`, not with ``carried``) the moving bodies
         carry their volume implicitly: the pressure and their velocities over
         the next interval are solved together (:mod:`._gmg_bodies`).
@@ -356,51 +392,77 @@ class TaichiPressureSolver:
         (False, 0)
         """
         t_start = time.perf_counter()
-        R = self.n_batch
-        k_dev, single = self._device_grid(kappa, "kappa", self._kappa_in)
-        _scan(k_dev, self._seen, self._connected_dev, self._flags)
-        scan = self._flags.to_numpy()
-        if scan[:, _BAD].any():
-            self._report_bad(k_dev)
-        changed = scan[:, _CHANGED] > 0
-        zeros = scan[:, _ZEROS] > 0
-        if changed.any():
-            t_setup = time.perf_counter()
-            self._cut_off(k_dev, changed, zeros)
-            self._build_operators(k_dev)
-            self._stats["rebuilds"] += int(changed.sum())
-            self._stats["setup_seconds"] += time.perf_counter() - t_setup
-        if x0 is not None:
-            x0_dev, _ = self._device_grid(x0, "x0", self._staging("x0", (R, *self.shape)))
-            _load_guess(x0_dev, self._unknown, self._cg, self._geo, self.p_ref)
+        REAL.dtype = self.real     # the type the kernels compile for (_gmg_cycle._Real)
         if bodies is not None and carried is not None:
             raise ValueError("give carried (the lagged carried flux) or bodies (the "
                              "implicit one), not both")
+        k_dev, single = self._device_grid(kappa, "kappa", self._kappa_in)
+        _scan(k_dev, self._seen, self._connected_dev, self._flags)
+        if not self._had_zeros.any():
+            # No realization had cut-off cells: solve before reading the scan (one
+            # read per solve, the report at its end), the operators built anew
+            # (the same kappa builds the same operator, bit for bit). Should the
+            # scan have found zero or invalid permeabilities, the kept guess is put
+            # back and the solve done again the careful way below.
+            _copy_row(self._cg, _SOL, _KEEP)
+            self._build(k_dev, None, None)
+            report = self._solve_system(x0, carried, occupied, bodies, k_dev)
+            scan = report[:, _REPORT_FLAGS:_REPORT_FLAGS + N_FLAGS]
+            if not (scan[:, _BAD].any() or scan[:, _ZEROS].any()):
+                return self._finish(report, scan[:, _CHANGED] > 0, single, host, t_start)
+            _copy_row(self._cg, _KEEP, _SOL)
+        else:
+            scan = self._flags.to_numpy()
+        if scan[:, _BAD].any():
+            self._report_bad(k_dev)
+        changed = scan[:, _CHANGED] > 0
+        if changed.any():
+            self._build(k_dev, changed, scan[:, _ZEROS] > 0)
+        report = self._solve_system(x0, carried, occupied, bodies, k_dev)
+        return self._finish(report, changed, single, host, t_start)
+
+    def _build(self, k_dev, changed, zeros):
+        """The cut-off cells of the realizations whose zeros may have moved (given
+        ``changed`` and ``zeros``), then the operators (every realization's)."""
+        t_setup = time.perf_counter()
+        if changed is not None:
+            self._cut_off(k_dev, changed, zeros)
+        self._build_operators(k_dev)
+        self._stats["setup_seconds"] += time.perf_counter() - t_setup
+
+    def _solve_system(self, x0, carried, occupied, bodies, k_dev):
+        """Guess, right-hand side, CG and the boundary fluxes; the report (host)."""
+        R = self.n_batch
+        if x0 is not None:
+            x0_dev, _ = self._device_grid(x0, "x0", self._staging("x0", (R, *self.shape)))
+            _load_guess(x0_dev, self._unknown, self._cg, self._geo, self._consts)
         self._bodies = bodies
         self._set_rhs(carried, occupied)
-        self._iterate()
-        state = self._state.to_numpy()
-        flags = self._flags.to_numpy()
+        return self._iterate(k_dev)
+
+    def _finish(self, report, changed, single, host, t_start):
+        """Flux check, pressure and SolveInfo from the report of a solve."""
+        flags = report[:, _REPORT_FLAGS:_REPORT_FLAGS + N_FLAGS]
         iterations = int(flags[:, _ITERS].max())
-        _boundary_fluxes(k_dev, self._cg, self._unknown, self._sides_dev, self._state,
-                         self._fluxes, self._geo, self.inflow)
-        fluxes = self._fluxes.to_numpy()
-        flux_in, flux_out = fluxes[:, 0].copy(), fluxes[:, 1].copy()
-        bnorm = np.sqrt(state[:, _BB])
-        limit = max(1e-6, 100.0 * self.tol) * np.maximum.reduce(
+        self._last_iterations = iterations
+        flux_in = report[:, _REPORT_FLUXES].astype(float)
+        flux_out = report[:, _REPORT_FLUXES + 1].astype(float)
+        bnorm = np.sqrt(report[:, _BB].astype(float))
+        limit = max(self.flux_floor, 100.0 * self.tol) * np.maximum.reduce(
             [np.abs(flux_in), np.abs(flux_out), bnorm])
         for r in np.flatnonzero(np.abs(flux_in - flux_out) > limit):
             raise FluxImbalanceError(int(r), float(flux_in[r]), float(flux_out[r]),
                                      float(limit[r]), self.tol)
-        _pressure(self._cg, self._unknown, self._out, self._geo, self.p_ref)
+        _pressure(self._cg, self._unknown, self._out, self._geo, self._consts)
         self._stats["solves"] += 1
         self._stats["iterations"] += iterations
+        self._stats["rebuilds"] += int(np.sum(changed))
         info = SolveInfo(flux_in=flux_in, flux_out=flux_out, iterations=iterations,
-                         residual=float(state[:, _RES].max()), rebuilt=bool(changed.any()),
+                         residual=float(report[:, _RES].max()), rebuilt=bool(np.any(changed)),
                          blocked=self._blocked.copy())
         pressure = self._out
         if host:
-            pressure = self._out.to_numpy()
+            pressure = self._out.to_numpy().astype(float)
             pressure = pressure[0] if single else pressure
         self._stats["solve_seconds"] += time.perf_counter() - t_start
         return pressure, info
@@ -415,13 +477,13 @@ class TaichiPressureSolver:
                 raise ValueError(f"{name} must have shape {expected}, got {tuple(array.shape)}")
             return array, False
         values, single = self._as_batch(array, name)
-        staging.from_numpy(np.ascontiguousarray(values, dtype=np.float64))
+        staging.from_numpy(np.ascontiguousarray(values, dtype=self._np_real))
         return staging, single
 
     def _staging(self, name, shape):
-        """A float64 device array for host inputs, made on first use."""
+        """A device array of the solve's type for host inputs, made on first use."""
         if name not in self._inputs:
-            self._inputs[name] = ti.ndarray(ti.f64, shape)
+            self._inputs[name] = ti.ndarray(self.real, shape)
         return self._inputs[name]
 
     def _report_bad(self, k_dev):
@@ -458,8 +520,7 @@ class TaichiPressureSolver:
     def _build_operators(self, k_dev):
         """Fine operator from kappa, the Galerkin levels below, the coarse factor."""
         _assemble(k_dev, self._unknown, self._sides_dev, self._op, self._cg, self._state,
-                  self._geo, self.dy / (self.dx * self.viscosity),
-                  self.dx / (self.dy * self.viscosity), self.inflow)
+                  self._geo, self._consts)
         for l in range(len(self.levels) - 1):
             _coarsen(self._op, self._geo, l, self.n_batch)
         _factor(self._op, self._chol, self._geo, len(self.levels) - 1)
@@ -477,7 +538,7 @@ class TaichiPressureSolver:
         else:
             c_dev = self._staging("carried", (R, nx, ny, 2))
             c_dev.from_numpy(np.ascontiguousarray(
-                np.asarray(carried, dtype=np.float64).reshape(R, nx, ny, 2)))
+                np.asarray(carried, dtype=self._np_real).reshape(R, nx, ny, 2)))
         given = occupied is not None
         if given:
             occ_dev, _ = self._device_grid(occupied, "occupied",
@@ -485,7 +546,7 @@ class TaichiPressureSolver:
         else:  # unused by the kernel: any (R, nx, ny) array
             occ_dev = self._kappa_in
         _set_carried_rhs(self._cg, c_dev, occ_dev, self._connected_dev, self._unknown,
-                         self._geo, self.dx, self.dy, given)
+                         self._geo, self._consts, given)
 
     def _set_body_rhs(self, bodies):
         """The kappa part of the right-hand side plus the bodies' carried flux."""
@@ -499,38 +560,61 @@ class TaichiPressureSolver:
         t = self._terms
         if t is None or t["owner"] is not bodies.owner or tuple(t["box"].shape) != (R, n, 4):
             self._terms = t = Terms(owner=bodies.owner, unknown=self._unknown,
-                                    body=ti.ndarray(ti.f64, (R, n, BODY_COLUMNS)),
+                                    body=ti.ndarray(self.real, (R, n, BODY_COLUMNS)),
                                     box=ti.ndarray(ti.i32, (R, n, 4)))
         _body_rhs(self._cg, t, bodies.centre, bodies.mobility, bodies.drift, self._geo,
-                  self.dx, self.dy)
+                  self._consts)
 
     def _body_args(self):
-        """(whether the bodies' terms apply, their pack, dx, dy) for the CG kernels."""
+        """(whether the bodies' terms apply, their pack) for the CG kernels."""
         if self._bodies is None:
-            return False, self._no_bodies, self.dx, self.dy
-        return True, self._terms, self.dx, self.dy
+            return False, self._no_bodies
+        return True, self._terms
 
-    def _iterate(self):
+    def _iterate(self, k_dev):
         """Preconditioned CG of every realization until each meets ``tol`` (or
-        MAXITER)."""
+        MAXITER); the boundary fluxes; the report (:func:`._gmg_cg._report`), read
+        on the host.
+
+        The host reads nothing but the report. On a GPU it runs as many CG
+        iterations as the last solve took before it first reads (a stopped
+        realization is skipped by every kernel, so running on costs launches,
+        not bits), then a quarter of that at a time; on the CPU, where a read
+        costs no more than a launch, one at a time."""
         arrays = (self._op, self._mg, self._cg, self._part, self._state, self._flags,
                   self._geo)
-        tol2, maxiter = self.tol**2, int(MAXITER)
+        maxiter = int(MAXITER)
         body = self._body_args()
         if self.parallel == "realizations":
-            _solve_each(*arrays, self._chol, tol2, maxiter, OVERCORRECTION, *body)
+            _solve_each(*arrays, self._chol, self._consts, maxiter, *body)
+            return self._read_report(k_dev)
+        cells = self.parallel == "cells"
+        _residual_check(*arrays, self._consts, maxiter, cells, *body)
+        if self.parallel == "cells" and self.unread_iterations:
+            last = self._last_iterations
+            block, then = (8, 2) if last is None else (max(1, last), max(1, last // 4))
         else:
-            cells = self.parallel == "cells"
-            running = _residual_check(*arrays, tol2, maxiter, True, cells, *body)
-            first = 1
-            while running:
+            block = then = 1
+        while True:
+            for _ in range(block):
                 self._precondition()
-                _cg_direction(*arrays, first, cells)
-                first = 0
-                running = _cg_step(*arrays, tol2, maxiter, cells, *body)
-                if not running:  # the true residual decides; restart where it drifted
-                    running = _residual_check(*arrays, tol2, maxiter, False, cells, *body)
-                    first = 1
+                _cg_direction(*arrays, cells)
+                _cg_step(*arrays, self._consts, maxiter, cells, *body)
+                _check_stopped(*arrays, self._consts, maxiter, cells, *body)
+            report = self._read_report(k_dev)
+            if not report[:, _REPORT_ACTIVE].any():
+                return report
+            block = then
+
+    #: Whether a GPU solve runs CG iterations unread (see _iterate); False reads
+    #: after each, as on the CPU (the same bits).
+    unread_iterations = True
+
+    def _read_report(self, k_dev):
+        _boundary_fluxes(k_dev, self._cg, self._unknown, self._sides_dev, self._state,
+                         self._fluxes, self._geo, self._consts)
+        _report(self._state, self._flags, self._fluxes, self._report)
+        return self._report.to_numpy()
 
     def _precondition(self):
         """``z = M r``: one V-cycle per running realization (module docstring)."""
@@ -538,13 +622,13 @@ class TaichiPressureSolver:
         arrays = (self._op, self._mg, self._geo, self._flags)
         for l in range(self._serial_from):
             for h in range(2 * SWEEPS):
-                _smooth(*arrays, l, h, 0, 0.0, cells)
+                _smooth(*arrays, l, h, 0, cells)
             _restrict(*arrays, l, cells)
         _serial_cycle(self._op, self._mg, self._chol, self._geo, self._flags,
-                      self._serial_from, OVERCORRECTION)
+                      self._serial_from)
         for l in reversed(range(self._serial_from)):
             for h in range(2 * SWEEPS):
-                _smooth(*arrays, l, h, 1, OVERCORRECTION, cells)
+                _smooth(*arrays, l, h, 1, cells)
 
     def state(self) -> dict:
         """What the next solve depends on beyond its kappa: the last solution (its
@@ -557,7 +641,7 @@ class TaichiPressureSolver:
         """Continue from :meth:`state`: the operator is rebuilt from the next kappa
         (the same kappa gives the same operator), the guess is the kept solution."""
         cg = self._cg.to_numpy()
-        solution = np.asarray(state["solution"], dtype=np.float64)
+        solution = np.asarray(state["solution"], dtype=self._np_real)
         if solution.shape != cg[_SOL].shape:
             raise ValueError(f"solver state has {solution.shape} unknowns, expected "
                              f"{cg[_SOL].shape} (another grid or batch)")
@@ -587,5 +671,6 @@ def _upload(array, dtype, element=None):
     array = np.ascontiguousarray(array)
     shape = array.shape[:-1] if element is not None else array.shape
     out = ti.ndarray(element if element is not None else dtype, shape)
-    out.from_numpy(array.astype({ti.f64: np.float64, ti.i32: np.int32, ti.i8: np.int8}[dtype]))
+    out.from_numpy(array.astype({ti.f64: np.float64, ti.f32: np.float32, ti.i32: np.int32,
+                                 ti.i8: np.int8}[dtype]))
     return out

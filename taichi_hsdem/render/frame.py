@@ -248,8 +248,9 @@ def _place_particles(x: ti.types.ndarray(dtype=ti.f64, ndim=2),
         o = first[i]
         if o >= 0:
             t = template[i]
-            c = ti.cos(theta[i])
-            s = ti.sin(theta[i])
+            # in f32 (pixels): SPIR-V (Vulkan) has no f64 trigonometry
+            c = ti.cast(ti.cos(ti.cast(theta[i], ti.f32)), ti.f64)
+            s = ti.cast(ti.sin(ti.cast(theta[i], ti.f32)), ti.f64)
             for k in range(block_start[t], block_start[t + 1]):
                 qx = local[k, 0]
                 qy = local[k, 1]

@@ -16,7 +16,8 @@ from ..geometry.placement import check_initial
 from ..limits import Part
 from ..scene import Scene, SceneError
 from ..scene.keys import AUTO, MAX_PACKING_FRACTION
-from .model import (CHECK_INTERVAL, CHECK_TRAVEL, F32_ONLY_ARCHS, FLUID_CELLS_PER_D, GPU_ARCHS,
+from .. import backend
+from .model import (CHECK_INTERVAL, CHECK_TRAVEL, FLUID_CELLS_PER_D, GPU_ARCHS,
                     MAX_TRAVEL_BETWEEN_SOLVES, UPDATE_CELL_FRACTION, Model, Species,
                     _Resolution)
 
@@ -227,14 +228,22 @@ def _fluid_grid(res: _Resolution, model: Model, nx: int, ny: int) -> None:
 
 def _resolve_stepping(model: Model, arch: str, values: dict, notes: dict) -> None:
     """``run.stepping``: the fused stepper for disks with held fluid forces on the
-    CPU (many steps per kernel launch, one realization per thread)."""
+    CPU (many steps per kernel launch, one realization per thread); on a GPU the
+    per-step path, whose kernels take a thread per body (docs/performance.md,
+    "GPU-shaped kernels"). Also notes what ``run.arch = "auto"`` chose and why."""
     sc = model.scene
+    if sc.run.arch == AUTO and backend.auto_reason():
+        notes["run.arch"] = f"{arch}: {backend.auto_reason()}"
     given = sc.run.stepping
     blockers = []
     if not model.all_disks:
         blockers.append("the particles are not all disks on the analytic path")
     if sc.fluid.enabled and sc.fluid.force_update == "step":
         blockers.append('fluid.force_update = "step" re-evaluates the fluid force every step')
+    if given == "fused" and arch in GPU_ARCHS:
+        # one realization per thread, and 42 arrays in one task where a GPU shader
+        # binds at most 31 (dem/fused.py)
+        blockers.append(f"the fused stepper runs on the CPU only, and this run is on {arch}")
     if given == "fused" and blockers:
         raise SceneError([f"{sc.source}: run.stepping = \"fused\" is not available: "
                           + "; ".join(blockers) + ' (use "auto" or "per_step")'])
@@ -248,27 +257,35 @@ def _resolve_stepping(model: Model, arch: str, values: dict, notes: dict) -> Non
     elif blockers:
         why = "per_step: " + "; ".join(blockers)
     else:
-        why = f"per_step on {arch}: one realization per thread would leave a GPU idle"
+        why = (f"per_step on {arch}: a thread per body; the fused stepper's one "
+               "realization per thread would leave a GPU idle")
     model.stepping = "fused" if fused else "per_step"
     values["run.stepping"] = model.stepping
     notes["run.stepping"] = why
 
 
+def _has_f64(arch: str) -> bool:
+    """Whether Taichi's ``arch`` has float64 kernels: the running backend's probe
+    (backend.has_f64) where that is ``arch``, else by name (Metal and GLES never)."""
+    if backend.current_arch() == arch:
+        return backend.has_f64()
+    return arch not in backend.NO_F64_ARCHS
+
+
 def _solver_for(given: str, arch: str) -> str:
     """The pressure solver ``fluid.solver = given`` runs with on ``arch``: ``auto``
-    is the Taichi multigrid where the backend has float64 kernels, else pyamg."""
-    if given != AUTO:
-        return given
-    return "gmg" if arch not in F32_ONLY_ARCHS else "amg"
+    is the Taichi multigrid on every backend (in float32 where it has no
+    float64 kernels)."""
+    return "gmg" if given == AUTO else given
 
 
 def resolve_particle_flux(scene: Scene, arch: str, res: _Resolution) -> Scene:
     """``scene`` with ``fluid.particle_flux`` decided, first of all (the damping's
     ``auto`` rule depends on it), and the reason noted. ``auto``: true where the
-    pressure is solved by the Taichi multigrid CG, whose implicit coupling stays
-    stable in a clog; false where it is solved by pyamg (``fluid.solver = "amg"``,
-    or ``"auto"`` on a backend without float64 kernels), where only the lagged
-    coupling exists and it goes unstable once particles jam."""
+    pressure is solved by the Taichi multigrid CG (the default on every backend),
+    whose implicit coupling stays stable in a clog; false where it is solved by
+    pyamg (``fluid.solver = "amg"``), where only the lagged coupling exists and
+    it goes unstable once particles jam."""
     fl = scene.fluid
     auto = fl.particle_flux == AUTO
     carried = _solver_for(fl.solver, arch) == "gmg" if auto else fl.particle_flux
@@ -293,26 +310,26 @@ def resolve_particle_flux(scene: Scene, arch: str, res: _Resolution) -> Scene:
 
 
 def _resolve_solver(model: Model, arch: str, res: _Resolution) -> None:
-    """``fluid.solver``: the Taichi multigrid where the backend has float64 kernels
-    (README, Speed: 2.8 times pyamg on the vani grid, 19 times at 1.1M cells)."""
+    """``fluid.solver``: the Taichi multigrid on every backend (README, Speed: 2.8
+    times pyamg on the vani grid, 19 times at 1.1M cells), in float64 where the
+    backend has it, else in float32 with its floors (fluid.gmg.F32_TOL_FLOOR)."""
+    from ..fluid.gmg import F32_FLUX_FLOOR, F32_TOL_FLOOR
     given = model.scene.fluid.solver
-    f64 = arch not in F32_ONLY_ARCHS
-    if given == "gmg" and not f64:
-        res.bad("fluid.solver", f'"gmg" solves in float64, which Taichi\'s {arch} backend '
-                'lacks; use "amg" (or "auto")')
-        res.stop_if_bad()
+    f64 = _has_f64(arch)
     model.fluid_solver = _solver_for(given, arch)
-    if given == AUTO:
+    if model.fluid_solver == "gmg" and (given == AUTO or not f64):
         res.note("fluid.solver", model.fluid_solver,
-                 "Taichi multigrid CG: every realization at once, on the device" if f64 else
-                 f"pyamg on the host: Taichi's {arch} backend has no float64 kernels")
+                 f"Taichi multigrid CG on {arch}: every realization at once, on the device, "
+                 + ("in float64" if f64 else
+                    f"in float32 (Taichi's {arch} backend has no float64 kernels): tolerance "
+                    f"at least {F32_TOL_FLOOR:g}, inflow and outflow balanced to "
+                    f"{F32_FLUX_FLOOR:g}"))
     fl = model.scene.fluid
     if fl.particle_flux and fl.flux_coupling == "implicit":
         if model.fluid_solver != "gmg":
             res.bad("fluid.flux_coupling", '"implicit" solves the particles\' velocities '
                     'inside the Taichi multigrid CG (fluid.solver = "gmg"), and this run '
-                    f'uses "{model.fluid_solver}"' + ("" if f64 else f" (Taichi's {arch} "
-                    "backend has no float64 kernels)") + '; use flux_coupling = "lagged" '
+                    f'uses "{model.fluid_solver}"; use flux_coupling = "lagged" '
                     "or solver = \"gmg\"")
             res.stop_if_bad()
         res.note("fluid.flux_coupling", "implicit",
