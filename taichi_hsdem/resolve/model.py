@@ -50,8 +50,6 @@ MAX_TRAVEL_BETWEEN_SOLVES = 0.5  # diameters a particle may move between solves,
 # Taichi backends on which "auto" stepping stays per-step (one realization per thread
 # would leave a GPU idle).
 GPU_ARCHS = ("cuda", "vulkan", "metal", "opengl", "dx11", "dx12", "amdgpu", "gles")
-# Taichi backends without float64 kernels (the multigrid solve needs them).
-F32_ONLY_ARCHS = ("vulkan", "metal", "opengl", "dx11", "dx12", "gles")
 
 
 @dataclass
