@@ -15,7 +15,9 @@ the feeder's re-entry strip; ``--strip``), averaged over the frames after
 it, with the particles' mean x-velocity there over the mean fluid speed
 ``Q / (H W_in)`` (the law assumes 1). ``obstacle`` is ``fluid.particle_flux = false`` (particles as fixed
 obstacles); ``implicit`` and ``lagged`` carry the particles' volume
-(``fluid.flux_coupling``).
+(``fluid.flux_coupling``) with the default share of it (``carried_fraction``:
+the 3D Stokes sphere's dipole); ``tracer`` carries all of it with
+``drift_ratio = 1`` (the earlier default: tracers of the depth-averaged flow).
 """
 import argparse
 import math
@@ -29,7 +31,9 @@ from taichi_hsdem import Simulation, load_scene
 SCENE = Path(__file__).resolve().parents[1] / "scenes" / "vani_phi026.toml"
 MODELS = {"obstacle": ["fluid.particle_flux=false"],
           "implicit": ["fluid.particle_flux=true", "fluid.flux_coupling=implicit"],
-          "lagged": ["fluid.particle_flux=true", "fluid.flux_coupling=lagged"]}
+          "lagged": ["fluid.particle_flux=true", "fluid.flux_coupling=lagged"],
+          "tracer": ["fluid.particle_flux=true", "fluid.flux_coupling=implicit",
+                     "particles.drift_ratio=1", "particles.carried_fraction=1"]}
 
 
 def measure(model: str, args) -> dict:
