@@ -234,6 +234,13 @@ def _check_host(host, path) -> None:
             and all(isinstance(v, float) for v in row[2:]) for row in flow):
         bad("flow", "must be rows [realization, t, pressure drop, flow rate] with t in "
                     "[0, host.t]")
+    network = host.get("network")
+    if not isinstance(network, list) or not all(
+            isinstance(row, list) and len(row) == 4 and _is_int(row[0]) and 0 <= row[0] < R
+            and _is_real(row[1]) and 0 <= row[1] <= t
+            and all(_is_int(v) and v >= 0 for v in row[2:]) for row in network):
+        bad("network", "must be rows [realization, t, injected, throats clogged] with t "
+                       "in [0, host.t]")
     caps = host.get("neighbor_caps")
     if not isinstance(caps, list) or len(caps) != 2 or not all(
             _is_int(c) and c >= 1 for c in caps):

@@ -7,6 +7,9 @@ simulator against. The fluid's exact solutions are in
 * :func:`head_on`: two disks meeting head on; their rebound ratio is ``e``.
 * :func:`node_law_disks`: the LS-DEM node law for two equal disks with the exact
   signed distance (no level-set grid), the reference of the contact studies.
+* :func:`rayleigh_square_array`, :func:`pillar_lattice_gradient`: the permeability
+  of a Hele-Shaw cell holding a square array of circular pillars, exact and as the
+  run's fluid grid solves it (docs/micromodels.md).
 
 Examples
 --------
@@ -132,3 +135,77 @@ def node_law_disks(nodes, depth, angle, normalize, diameter=1.0, turn=0.0):
     if na and nb:
         f_i = 0.5 * f_i
     return float(-f_i @ u / delta), na, nb
+
+
+def rayleigh_square_array(fraction: float) -> float:
+    """Effective conductivity of a square array of non-conducting circular
+    cylinders at area ``fraction`` in a matrix of conductivity 1 (Rayleigh 1892,
+    with the coefficients of Perrins, McKenzie and McPhedran 1979, Proc. R. Soc.
+    A 369, 207; Keller's reciprocal theorem relates it to the perfectly
+    conducting array): the Darcy permeability of a Hele-Shaw cell holding such an
+    array of pillars, over the empty cell's ``H^2/12``, is this number (the depth
+    averaged pressure is harmonic with no flux into the pillars).
+
+    >>> round(rayleigh_square_array(0.2565), 5)
+    0.59129
+    """
+    f = float(fraction)
+    return 1.0 - 2.0 * f / (1.0 + f - 0.305827 * f ** 4 / (1.0 - 1.402958 * f ** 8)
+                            - 0.013362 * f ** 8)
+
+
+def pillar_lattice_gradient(cells_per_period: int, rows: int = 2, columns: int = 10,
+                            diameter: float = 200e-6, spacing: float = 350e-6,
+                            sides: int = 96) -> tuple[float, float]:
+    """The mean pressure gradient across the middle of a channel of ``rows`` x
+    ``columns`` circular pillars (``sides``-gons) on a square lattice whose walls lie
+    on the lattice's symmetry lines (half a spacing from the outer pillars' centres,
+    so the channel is an exact strip of the infinite array), solved on the fluid
+    grid of the run (cells whose centre is fluid, ``cells_per_period`` cells per
+    spacing, the finite volumes of :mod:`taichi_hsdem.fluid.system`, pyamg's CG
+    to 1e-12) under a flow-rate inlet. Returns ``(computed, exact)`` as
+    ``K_eff / (H^2/12)``: the computed one from the difference of the mean
+    pressures of the fluid cells of two unit cells two periods apart in the middle
+    (exact for a periodic field: the mean of ``p + G x`` is the same in every unit
+    cell), the exact one :func:`rayleigh_square_array` at the polygons' area
+    fraction."""
+    from .fluid import PressureSolver
+    from .geometry import walls
+    from .geometry.micromodel import pillar_polygon
+    from .geometry.polygon import signed_area
+    from .laws import free_permeability
+    s, n = float(spacing), int(cells_per_period)
+    inlet = outlet = 2.0 * s
+    length, width = inlet + columns * s + outlet, rows * s
+    pillars = [pillar_polygon((inlet + (j + 0.5) * s, (i + 0.5) * s - width / 2),
+                              diameter / 2, sides) for j in range(columns) for i in range(rows)]
+    outline = [[0.0, -width / 2], [length, -width / 2], [length, width / 2],
+               [0.0, width / 2]]
+    g = walls.from_polygon(outline, pillars, constriction_x=inlet + columns * s)
+    dx = s / n
+    nx, ny = int(round(length / dx)), rows * n
+    xc = (np.arange(nx) + 0.5) * dx
+    yc = -width / 2 + (np.arange(ny) + 0.5) * dx
+    pts = np.stack(np.meshgrid(xc, yc, indexing="ij"), axis=-1).reshape(-1, 2)
+    active = (walls.wall_distance(g, pts) > 0).reshape(nx, ny)
+    viscosity, gap, q = 1e-3, 100e-6, 1e-10
+    k0 = free_permeability(gap)
+    solver = PressureSolver(active, dx, dx, viscosity, {"kind": "flow_rate", "Q": q,
+                                                         "p_out": 0.0},
+                            tol=1e-12, gap=gap)
+    try:
+        p, _ = solver.solve(np.where(active, k0, 0.0))
+    finally:
+        solver.close()
+    p = np.asarray(p)
+
+    def cell_mean(j):            # unit cell j of the array, all rows
+        i0 = int(round((inlet + j * s) / dx))
+        block = p[i0:i0 + n]
+        return float(np.nanmean(block))
+    middle = columns // 2 - 1
+    gradient = (cell_mean(middle) - cell_mean(middle + 2)) / (2 * s)
+    flux = q / gap                                  # per unit depth
+    computed = viscosity * flux / (gradient * width * k0)
+    fraction = abs(signed_area(pillars[0])) / s ** 2
+    return computed, rayleigh_square_array(fraction)

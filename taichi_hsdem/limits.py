@@ -40,6 +40,12 @@ MAX_PARTICLE_VERTICES = 1000
 #: Most vertices of a channel outline and its obstacles together: the scene check
 #: and the wall level set grow with their square and product (6000 took minutes).
 MAX_OUTLINE_VERTICES = 2000
+#: Most vertices of all obstacles together (a micromodel's pillars), each obstacle a
+#: polygon of at most MAX_OUTLINE_VERTICES: the wall level set measures only the
+#: obstacles near each point (geometry/nearest.py) and the obstacle checks only
+#: neighbouring pairs, so they grow with the vertex count, not with its square
+#: (docs/performance.md, "Micromodels").
+MAX_OBSTACLE_VERTICES = 50_000
 #: Most surface nodes of one particle template: every contact of the particle
 #: tests each node (the automatic count is 40 to a few hundred).
 MAX_NODES = 20000

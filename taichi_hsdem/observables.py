@@ -6,8 +6,9 @@ functions here, which update its :class:`~taichi_hsdem.runstate.RunState`:
 
 * escapes and the clog at the constriction (:func:`count_escapes`, with
   :func:`arch_static` and :func:`rest_speed`: the ``[clog]`` criterion of
-  docs/scene.md);
-* every throat's passages and clog (:func:`observe_throats`, micromodels);
+  docs/scene.md), or, with several throats, of the pore network (:func:`network_clog`);
+* every throat's passages and clog (:func:`observe_throats`, micromodels), and the
+  network's injected bodies and clogged throats over time (:func:`network_rows`);
 * feeding the inlet (:func:`feed`, ``feed.mode = "count"``);
 * the ``flow.csv`` rows of a pressure solve (:func:`flow_rows`);
 * and, at the end, the :class:`Result` with its summary (:func:`run_result`).
@@ -42,6 +43,8 @@ class Result:
     flow: list = field(default_factory=list)        # (realization, t, pressure drop, Q)
     # (realization, throat, x, y, width, passages, clogged, t_clog), with several throats
     throats: list = field(default_factory=list)
+    # (realization, t, injected, throats clogged), with several throats
+    network: list = field(default_factory=list)
     final: dict = field(default_factory=dict)       # numpy arrays (R, N, ...)
     notes: dict = field(default_factory=dict)       # what every "auto" chose, and why
 
@@ -91,34 +94,58 @@ def arch_static(model, u_ref, st, r) -> bool:
     return np.linalg.norm(st["v"][r][near], axis=1).max() < rest_speed(model, u_ref, r)
 
 
-def count_escapes(rs: RunState, model, r, escaped, dead, st) -> bool:
+def count_escapes(rs: RunState, model, r, escaped, dead, st, throats=None) -> bool:
     """Escapes and the clog of realization ``r`` at a check at ``rs.t``: ``escaped``
     (R,) the bodies past the escape line so far, ``dead`` (R, S) the dead bodies
     per species now, ``st`` the state. Returns True when the realization clogged
-    and stops (``run.stop_at_clog``)."""
+    and stops (``run.stop_at_clog``).
+
+    With ``throats`` (two or more: a pore network, :func:`network_clog`) the
+    realization clogs when its clogged throats have cut the inlet off from the
+    outlet for clog.window (a throat's clog needs no passage for clog.window, not
+    that long at rest: a throat that particles seldom reach would otherwise close a
+    cut the moment one of them paused in it); otherwise when the arch at the
+    constriction holds (:func:`arch_static`)."""
     res = rs.results[r]
     went = escaped[r] > rs.escaped[r]
     if went:
         rs.escaped[r] = escaped[r]
         rs.last_escape_t[r] = rs.t
         rs.arch_static_t[r] = np.nan     # an arch that holds forms after this
-    static = not went and arch_static(model, rs.u_ref, st, r)
-    if static and np.isnan(rs.arch_static_t[r]):
-        rs.arch_static_t[r] = rs.t
     res.escapees = int(escaped[r])
     rs.escaped_by_species[r] += dead[r] - rs.unfed_by_species[r]
-    # a clog: no escape for clog.window and the arch static now. It formed when
-    # the checks first found it static after the last escape (the speed at the
-    # neck flickers about the threshold once it holds, so the latest static
-    # stretch would start late)
     sc = model.scene
-    if static and rs.t - rs.last_escape_t[r] >= sc.clog.window:
-        res.clogged = True
-        res.t_clog = float(rs.arch_static_t[r])
-        if sc.run.stop_at_clog:
-            res.t_stop = rs.t
-            return True
+    if throats is not None:
+        t_clog = network_clog(rs, throats, r)
+        if t_clog is None or rs.t - t_clog < sc.clog.window:
+            return False            # open, or the cut not yet held for clog.window
+    else:
+        static = not went and arch_static(model, rs.u_ref, st, r)
+        if static and np.isnan(rs.arch_static_t[r]):
+            rs.arch_static_t[r] = rs.t
+        # a clog: no escape for clog.window and the arch static now. It formed
+        # when the checks first found it static after the last escape (the speed
+        # at the neck flickers about the threshold once it holds, so the latest
+        # static stretch would start late)
+        if not (static and rs.t - rs.last_escape_t[r] >= sc.clog.window):
+            return False
+        t_clog = float(rs.arch_static_t[r])
+    res.clogged = True
+    res.t_clog = t_clog
+    if sc.run.stop_at_clog:
+        res.t_stop = rs.t
+        return True
     return False
+
+
+def network_clog(rs: RunState, throats, r) -> float | None:
+    """When the throats of realization ``r`` clogged now (``rs.throat_t_clog``) first
+    cut the inlet off from the outlet, every path between them crossing a clogged
+    throat (:meth:`~taichi_hsdem.geometry.throats.Throats.blocked_since`); None
+    while a path is open. A throat's clog time is when it was first found at rest
+    after its latest passage, so this is when the last throat of the cut did."""
+    t = throats.blocked_since(rs.throat_t_clog[r])
+    return None if np.isnan(t) else t
 
 
 def observe_throats(rs: RunState, model, throats, st, r) -> None:
@@ -140,6 +167,24 @@ def observe_throats(rs: RunState, model, throats, st, r) -> None:
     clog = (static & np.isnan(rs.throat_t_clog[r])
             & (t - rs.throat_last_passage_t[r] >= model.scene.clog.window))
     rs.throat_t_clog[r, clog] = rs.throat_static_t[r, clog]
+
+
+def network_rows(rs: RunState, checked, escaped, alive) -> None:
+    """The ``network`` rows of a check (several throats): for each realization in
+    ``checked``, ``(r, t, injected, throats clogged)`` when either changed since its
+    last row (or it has none). Injected: the bodies alive now (after feeding) and
+    the escapes so far (``escaped`` (R,)), as every escaped body died once."""
+    n_clogged = np.isfinite(rs.throat_t_clog).sum(axis=1)
+    injected = np.asarray(escaped, dtype=np.int64) + np.asarray(alive).sum(axis=1)
+    last = {}
+    for row in reversed(rs.network):
+        if len(last) == len(rs.results):
+            break
+        last.setdefault(row[0], row)
+    for r in np.flatnonzero(checked):
+        now = (int(injected[r]), int(n_clogged[r]))
+        if r not in last or (last[r][2], last[r][3]) != now:
+            rs.network.append((int(r), rs.t, *now))
 
 
 # ------------------------------------------------------------------ feeding
@@ -258,6 +303,34 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
              "alive": st["alive"][r].tolist(), "species": st["species"].tolist()}
             for r in range(len(rs.results))],
     }
+    if len(throats) >= 2:
+        summary["network"] = network_summary(rs, throats, real, escaped, st)
     return Result(scene=sc, summary=summary, series=series, flow=list(rs.flow),
                   throats=throat_rows(throats, rs.throat_passages, rs.throat_t_clog),
-                  final=st, notes=dict(model.notes))
+                  network=list(rs.network), final=st, notes=dict(model.notes))
+
+
+def network_summary(rs: RunState, throats, real, escaped, st) -> dict:
+    """``summary.json``'s ``network`` entry (several throats): the throat and pore
+    counts, what ``clogged`` means, and per realization (unstable ones null) the
+    throats clogged now, their fraction, the bodies injected so far and when the
+    inlet was cut off from the outlet (``t_clog``, null while open)."""
+    clogged = np.isfinite(rs.throat_t_clog)
+    injected = np.asarray(escaped, dtype=np.int64) + np.asarray(st["alive"]).sum(axis=1)
+    rows = []
+    for r, row in enumerate(real):
+        if row["status"] == "unstable":
+            rows.append(None)
+            continue
+        t_cut = throats.blocked_since(rs.throat_t_clog[r])
+        rows.append({"throats_clogged": int(clogged[r].sum()),
+                     "fraction_clogged": float(clogged[r].mean()),
+                     "injected": int(injected[r]),
+                     "t_cut": None if np.isnan(t_cut) else float(t_cut)})
+    fractions = [row["fraction_clogged"] for row in rows if row is not None]
+    return {"throats": len(throats), "pores": int(throats.n_pores),
+            "clogged_means": "the clogged throats have cut the inlet off from the outlet "
+                             "for clog.window: every path of pores between them crosses "
+                             "one",
+            "mean_fraction_clogged": float(np.mean(fractions)) if fractions else None,
+            "realizations": rows}

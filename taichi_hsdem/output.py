@@ -94,6 +94,20 @@ def write_throats(rows, statuses, out: Path):
     atomic_write(out / "throats.csv", buf.getvalue())
 
 
+def write_network(rows, statuses, n_throats: int, out: Path):
+    """``network.csv``: realization,t,injected,throats_clogged,fraction_clogged, at
+    the first check and every check that changed the bodies injected or the
+    throats clogged (several throats); unstable realizations are left out."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["realization", "t", "injected", "throats_clogged", "fraction_clogged"])
+    for r, t, injected, clogged in rows:
+        if statuses[r] != "unstable":
+            w.writerow([r, repr(float(t)), int(injected), int(clogged),
+                        repr(clogged / n_throats)])
+    atomic_write(out / "network.csv", buf.getvalue())
+
+
 def write_series(series, statuses, out: Path):
     """``escapees.csv``: realization,t,escapees; unstable realizations are left out."""
     buf = io.StringIO()
@@ -106,9 +120,11 @@ def write_series(series, statuses, out: Path):
 
 
 #: Files (and folders) a run writes into its output folder.
-RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "flow.csv", "throats.csv", "summary.json",
-                "video.mp4",
-                "escapees.png", "pmf.png", "series.pvd", "vtk", checkpoint.FILE)
+RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "flow.csv", "throats.csv", "network.csv",
+                "summary.json", "video.mp4", "escapees.png", "pmf.png", "permeability.png",
+                "throats_clogged.png", "clog_map.png", "series.pvd", "vtk", checkpoint.FILE)
+#: The plots a run may draw (report.py).
+PLOTS = ("escapees.png", "pmf.png", "permeability.png", "throats_clogged.png", "clog_map.png")
 #: The list of the files the runs of this project wrote in a folder: only these
 #: are ever replaced or removed there.
 MANIFEST = ".taichi_hsdem-files.json"
@@ -256,6 +272,10 @@ class Staging:
         if result.throats:
             write_throats(result.throats, statuses, self.tmp)
             names.insert(names.index("escapees.csv") + 1, "throats.csv")
+        if result.network:
+            write_network(result.network, statuses, result.summary["network"]["throats"],
+                          self.tmp)
+            names.insert(names.index("throats.csv") + 1, "network.csv")
         write_summary(result.summary, self.tmp)
         earlier = owned_files(self.out)
         kept = set(names) | {"summary.json", checkpoint.FILE}
@@ -390,6 +410,29 @@ class Pictures:
         summary.update(self.notes)
         summary["plots"] = report.plot_run(result, self.staged.tmp,
                                            law=report.steady_stream_law(self.sim))
+        if len(self.sim.throats) >= 2:
+            summary["plots"].update(self._network(result))
+
+    def _network(self, result) -> dict:
+        """The empty domain's flow (K0) and each realization's last K/K0 into the
+        summary's ``network`` entry, and the network plots; returns what was drawn."""
+        sim, net = self.sim, result.summary.setdefault("network", {})
+        empty = None
+        if sim.fluid is not None:
+            from .fluid import FluxImbalanceError
+            try:
+                empty = report.empty_flow(sim.model)
+            except FluxImbalanceError as exc:
+                net["empty_skipped"] = f"the empty domain's solve failed: {exc}"
+        if empty is not None:
+            net["empty"] = {"pressure_drop": empty[0], "flow_rate": empty[1]}
+            last = {r: float(k[-1]) for r, (_, k) in
+                    report.permeability_ratio(result.flow, empty).items()}
+            for r, row in enumerate(net.get("realizations", [])):
+                if row is not None:
+                    row["permeability_ratio"] = last.get(r)
+        return report.plot_network(result, self.staged.tmp, sim.throats, sim.model.geometry,
+                                   empty)
 
     @property
     def vtk_frames(self) -> int:
@@ -397,7 +440,7 @@ class Pictures:
 
     def files(self) -> list[str]:
         """The staged files to publish."""
-        names = ["video.mp4", "escapees.png", "pmf.png", "series.pvd", "vtk"]
+        names = ["video.mp4", *PLOTS, "series.pvd", "vtk"]
         return [n for n in names if (self.staged.tmp / n).exists()]
 
 

@@ -14,11 +14,24 @@
   geometric law's, and the p-value of the test of a constant clogging
   probability (:func:`taichi_hsdem.stats.geometric_fit_test`).
 
+With several throats (a micromodel, :func:`plot_network`):
+
+* ``permeability.png``: the permeability of the whole domain against time,
+  ``K(t)/K0 = (Q / dp) / (Q0 / dp0)`` from ``flow.csv``'s flow rate ``Q`` and
+  pressure drop ``dp`` (Darcy: ``K`` proportional to ``Q / dp`` in one geometry),
+  ``K0`` the empty domain's (:func:`empty_flow`: the same grid and solve without
+  particles);
+* ``throats_clogged.png``: the fraction of throats clogged against the particles
+  injected (``network.csv``);
+* ``clog_map.png``: the geometry with each throat drawn across its gap, coloured
+  by the share of realizations in which it is clogged at the end.
+
 Matplotlib comes with the ``plot`` extra; without it the plots are skipped and
 the summary says so.
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -165,3 +178,159 @@ def steady_stream_law(sim) -> tuple[float, float, float, float] | None:
     n = sum(s.count for s in m.species)
     d = sum(s.count * s.d_eq for s in m.species) / n
     return solid / area, sc.fluid.flow_rate, sc.fluid.gap, d
+
+
+def empty_flow(model) -> tuple[float, float] | None:
+    """``(pressure drop, flow rate)`` of the empty domain: the run's fluid grid and
+    boundary condition with no particle (every fluid cell at the free
+    permeability ``H^2/12``), solved to 1e-10 with pyamg's CG on the finite-volume
+    system the run solves, and read as ``flow.csv`` reads the run
+    (:func:`~taichi_hsdem.observables.flow_rows`); None without fluid."""
+    from .fluid import PressureSolver
+    from .observables import flow_rows
+    fl = model.scene.fluid
+    if not fl.enabled:
+        return None
+    solver = PressureSolver(model.fluid_active, model.fluid_dx, model.fluid_dx,
+                            fl.viscosity, model.bc(), n_batch=1, tol=1e-10, gap=fl.gap)
+    try:
+        pressure, info = solver.solve(np.where(model.fluid_active, model.kappa_free, 0.0))
+    finally:
+        solver.close()
+    (_, _, drop, q), = flow_rows(fl, info.flux_out, np.asarray(pressure)[None], [True], 0.0)
+    return drop, q
+
+
+def permeability_ratio(flow, empty) -> dict:
+    """``{realization: (t, K/K0)}`` arrays from ``flow`` rows (realization, t,
+    pressure drop, flow rate) and ``empty`` = (dp0, Q0) (:func:`empty_flow`)."""
+    dp0, q0 = empty
+    per = {}
+    for r, t, dp, q in flow:
+        per.setdefault(r, []).append((t, (q / dp) / (q0 / dp0) if dp else np.nan))
+    return {r: tuple(np.array(v).T) for r, v in per.items()}
+
+
+def plot_network(result, folder: Path, throats, geometry, empty) -> dict:
+    """Draw ``permeability.png`` (with ``empty`` = (dp0, Q0), :func:`empty_flow`),
+    ``throats_clogged.png`` and ``clog_map.png`` into ``folder`` (module notes);
+    returns what was drawn, for the summary's ``plots``."""
+    try:
+        plt = _pyplot()
+    except ImportError:
+        return {"network_skipped": 'matplotlib is not installed (pip install '
+                                   '"taichi_hsdem[plot]")'}
+    folder = Path(folder)
+    real = result.summary["realizations"]
+    stable = {r for r, row in enumerate(real) if row["status"] != "unstable"}
+    si = result.scene.units == "SI"
+    drawn = {}
+    # K(t) / K0
+    if empty is not None and result.flow:
+        ratio = {r: v for r, v in permeability_ratio(result.flow, empty).items() if r in stable}
+        fig, ax = plt.subplots(figsize=(6.4, 4.2))
+        for r, (t, k) in sorted(ratio.items()):
+            ax.plot(t, k, lw=0.8, alpha=0.6, color="0.5")
+        if ratio:
+            grid = np.linspace(0.0, max(float(t.max()) for t, _ in ratio.values()), 200)
+            # a realization's curve ends where it stopped: the mean over those still in
+            curves = [np.where(grid <= t.max(), np.interp(grid, t, k), np.nan)
+                      for t, k in ratio.values()]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mean = np.nanmean(np.array(curves), axis=0)
+            ax.plot(grid, mean, color="C0", lw=2,
+                    label=f"mean over those of the {len(ratio)} realization(s) still running")
+            ax.legend(fontsize=8)
+        ax.axhline(1.0, color="k", lw=0.6, ls=":")
+        ax.set_ylim(bottom=0.0)
+        ax.set_xlabel("t (s)" if si else "t")
+        ax.set_ylabel("K / K0")
+        unit = " Pa" if si else ""
+        ax.set_title(f"{result.scene.name}: permeability (K0: the empty domain, "
+                     f"dp0 = {empty[0]:.3g}{unit})", fontsize=9)
+        fig.tight_layout()
+        fig.savefig(folder / "permeability.png", dpi=110)
+        plt.close(fig)
+        drawn["permeability"] = "permeability.png"
+    # fraction of throats clogged against particles injected
+    T = len(throats)
+    per = {}
+    for r, t, n, c in result.network:
+        if r in stable:
+            per.setdefault(r, []).append((n, c / T))
+    if per:
+        fig, ax = plt.subplots(figsize=(6.4, 4.2))
+        for r, rows in sorted(per.items()):
+            n, f = np.array(rows).T
+            ax.step(n, f, where="post", lw=0.8, alpha=0.6, color="0.5")
+        top = max(max(n for n, _ in rows) for rows in per.values())
+        grid = np.linspace(0.0, top, 200)
+        curves = []
+        for rows in per.values():
+            n, f = np.array(rows).T
+            at = np.searchsorted(n, grid, side="right") - 1
+            # a realization's curve ends where it stopped: the mean over those still in
+            curves.append(np.where((at >= 0) & (grid <= n.max()), f[np.maximum(at, 0)], np.nan))
+        with warnings.catch_warnings():      # past every realization's end: NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean = np.nanmean(np.array(curves), axis=0)
+        ax.plot(grid, mean, color="C3", lw=2,
+                label=f"mean over those of the {len(curves)} realization(s) still running")
+        ax.set_xlabel("particles injected")
+        ax.set_ylabel(f"fraction of the {T} throats clogged")
+        ax.set_ylim(0.0, 1.0)
+        ax.set_title(f"{result.scene.name}: throats clogged", fontsize=9)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(folder / "throats_clogged.png", dpi=110)
+        plt.close(fig)
+        drawn["throats_clogged"] = "throats_clogged.png"
+    # where the clogs formed
+    share = np.zeros(T)
+    for r, k, x, y, width, passages, clogged, t_clog in result.throats:
+        if r in stable and clogged:
+            share[k] += 1.0
+    share /= max(1, len(stable))
+    drawn.update(draw_clog_map(plt, folder / "clog_map.png", geometry, throats, share,
+                               len(stable), result.scene.name, si))
+    return drawn
+
+
+def draw_clog_map(plt, path, geometry, throats, share, n_real, name, si) -> dict:
+    """The geometry (walls grey) with every throat's segment: open throats thin
+    grey, clogged ones coloured by ``share`` (T,), the fraction of the ``n_real``
+    realizations in which each is clogged at the end."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.patches import Polygon
+    g = geometry
+    scale = 1e3 if si else 1.0
+    fig, ax = plt.subplots(figsize=(7.5, 7.5 * (g.y_max - g.y_min) / (g.x_max - g.x_min)
+                                    + 1.4))
+    ax.add_patch(Polygon(g.outline * scale, closed=True, facecolor="0.97", edgecolor="0.4",
+                         lw=0.8))
+    for o in g.obstacles:
+        ax.add_patch(Polygon(np.asarray(o) * scale, closed=True, facecolor="0.6",
+                             edgecolor="0.4", lw=0.4))
+    segs = np.stack([throats.start, throats.end], axis=1) * scale
+    ax.add_collection(LineCollection(segs[share == 0], colors="0.75", linewidths=0.6))
+    hot = share > 0
+    cmap = plt.get_cmap("Reds")
+    lines = LineCollection(segs[hot], cmap=cmap, linewidths=2.5)
+    lines.set_array(share[hot])
+    lines.set_clim(0.0, 1.0)
+    ax.add_collection(lines)
+    fig.colorbar(lines, ax=ax, fraction=0.04, pad=0.02,
+                 label=f"share of the {n_real} realization(s) clogged there at the end")
+    ax.set_xlim(g.x_min * scale, g.x_max * scale)
+    ax.set_ylim(g.y_min * scale, g.y_max * scale)
+    ax.set_aspect("equal")
+    unit = " (mm)" if si else ""
+    ax.set_xlabel("x" + unit)
+    ax.set_ylabel("y" + unit)
+    ax.set_title(f"{name}: where the {len(share)} throats clogged "
+                 f"({int(hot.sum())} clogged in some realization)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return {"clog_map": Path(path).name}

@@ -63,6 +63,10 @@ class RunState:
         ``(realization, t, escapees)`` rows so far; ``next_series`` the time of the next.
     flow : list
         ``(realization, t, pressure drop, flow rate)`` rows, one per pressure solve.
+    network : list
+        With several throats: ``(realization, t, injected, throats clogged)`` rows,
+        at the first check and at every check that changed either (injected: the
+        bodies placed or fed so far).
     any_running : bool
         Whether the last check left any realization running.
     history_overflows, launches : int
@@ -94,6 +98,7 @@ class RunState:
     results: list
     series: list
     flow: list
+    network: list
     next_series: float
     any_running: bool
     history_overflows: int
@@ -120,7 +125,7 @@ class RunState:
             t=0.0, steps=0, seeds=[int(s) for s in seeds],
             rngs=[np.random.default_rng(s) for s in seeds],
             results=[RealizationResult(seed=int(s)) for s in seeds],
-            series=[], flow=[], next_series=0.0, any_running=True,
+            series=[], flow=[], network=[], next_series=0.0, any_running=True,
             history_overflows=0, launches=0, e0=None, u_ref=None,
             last_escape_t=np.zeros(R), escaped=np.zeros(R, dtype=np.int64),
             arch_static_t=np.full(R, np.nan),
@@ -141,6 +146,7 @@ class RunState:
             "results": [dict(vars(r)) for r in self.results],
             "series": [[int(r), float(t), int(s)] for r, t, s in self.series],
             "flow": [[int(r), float(t), float(dp), float(q)] for r, t, dp, q in self.flow],
+            "network": [[int(r), float(t), int(n), int(c)] for r, t, n, c in self.network],
             "next_series": self.next_series, "any_running": self.any_running,
             "history_overflows": self.history_overflows, "launches": self.launches,
             "e0": None if self.e0 is None else [float(v) for v in self.e0],
@@ -164,6 +170,7 @@ class RunState:
             results=[RealizationResult(**saved) for saved in values["results"]],
             series=[(int(r), float(t), int(s)) for r, t, s in values["series"]],
             flow=[(int(r), float(t), float(dp), float(q)) for r, t, dp, q in values["flow"]],
+            network=[(int(r), float(t), int(n), int(c)) for r, t, n, c in values["network"]],
             next_series=float(values["next_series"]),
             any_running=bool(values["any_running"]),
             history_overflows=int(values["history_overflows"]),

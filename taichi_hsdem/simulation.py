@@ -348,6 +348,7 @@ class Simulation:
         # every check reads the state: the arch test runs at each one (t_clog)
         st = self.state() if running.any() and not final else None
         dead = None if st is None else self._dead_by_species(st["alive"])
+        checked = running.astype(bool)        # a copy: running changes below
         changed = False
         for r in range(self.R):
             if not running[r]:
@@ -386,7 +387,8 @@ class Simulation:
                 observables.observe_throats(rs, m, self.throats, st, r)
             if res.clogged or final:
                 continue            # stop_at_clog = false: the stream goes on, the result is kept
-            if observables.count_escapes(rs, m, r, escaped, dead, st):
+            if observables.count_escapes(rs, m, r, escaped, dead, st,
+                                         self.throats if len(self.throats) >= 2 else None):
                 running[r] = 0      # clogged, and run.stop_at_clog
                 changed = True
         if changed:
@@ -396,6 +398,9 @@ class Simulation:
                 self._feed(running, st)
             rs.unfed_by_species = self._dead_by_species(st["alive"])
             rs.check_x, rs.check_alive = st["x"], st["alive"]
+            if len(self.throats) >= 2:
+                stable = np.array([res.status == "ok" for res in rs.results])
+                observables.network_rows(rs, checked & stable, escaped, st["alive"])
         return bool(running.any())
 
     def kinetic_energy(self) -> np.ndarray:

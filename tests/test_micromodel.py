@@ -213,6 +213,9 @@ def test_resumed_run_keeps_every_throats_passages_and_clog(tmp_path):
     for name in ("throat_passages", "throat_last_passage_t", "throat_t_clog"):
         assert np.array_equal(getattr(second.run_state, name),
                               getattr(straight.run_state, name), equal_nan=True)
+    # the injected bodies and clogged throats over time too (network.csv)
+    assert second.run_state.network == straight.run_state.network
+    assert [row[3] for row in straight.run_state.network][-1] == 1
 
 
 def test_shipped_micromodel_writes_its_throats(tmp_path, capsys):
@@ -236,3 +239,163 @@ def test_shipped_micromodel_writes_its_throats(tmp_path, capsys):
     bound = 2 * 100e-6 * math.tan(math.pi / 48) ** 2
     assert all(abs(float(r[4]) - 150e-6) <= bound * (1 + 1e-9) for r in rows[1:])
     assert (out / "flow.csv").exists()
+    with open(out / "network.csv") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["realization", "t", "injected", "throats_clogged", "fraction_clogged"]
+    assert rows[1][2:] == ["40", "0", "0.0"]           # the 40 disks placed, none clogged
+    import json
+    summary = json.loads((out / "summary.json").read_text())
+    net = summary["network"]
+    assert (net["throats"], net["pores"]) == (25, 20)
+    assert net["realizations"][0]["throats_clogged"] == 0
+    # K0: the empty array's pressure drop at the pump's flow rate, a little below
+    # the first solve's (the disks in the inlet add resistance)
+    first = next(csv.reader(open(out / "flow.csv")))
+    assert 4.0 < net["empty"]["pressure_drop"] < 4.5
+    assert net["empty"]["flow_rate"] == pytest.approx(2e-10, rel=1e-9)
+    assert 0.5 < net["realizations"][0]["permeability_ratio"] <= 1.0
+    for name in ("permeability.png", "throats_clogged.png", "clog_map.png"):
+        assert (out / name).stat().st_size > 1000
+        assert summary["plots"][name.split(".")[0]] == name
+
+
+def test_wall_distance_near_many_obstacles_is_the_brute_forces_bit_for_bit():
+    """The wall distance measures only the obstacles near each point
+    (geometry/nearest.py): the same bits as every edge measured, inside and out,
+    for circular, square and hexagonal pillars in regular and random arrays."""
+    from taichi_hsdem.geometry import walls as wl
+    from taichi_hsdem.geometry.walls import _distance_to_pieces, _in_fluid
+    rng = np.random.default_rng(5)
+    for kind, extra in [("square", {}), ("random", dict(spread=0.2, min_throat=0.3, seed=2)),
+                        ("staggered", dict(sides=6, shape="polygon")),
+                        ("square", dict(sides=4, shape="polygon"))]:
+        m = pillar_array(kind, rows=3, columns=4, diameter=1.0, spacing=1.75, inlet_length=2.0,
+                         outlet_length=1.0, **extra)
+        g = wl.from_polygon(m.outline, m.obstacles, constriction_x=m.x_exit)
+        pts = np.concatenate([
+            np.column_stack([rng.uniform(g.x_min - 1, g.x_max + 1, 20000),
+                             rng.uniform(g.y_min - 1, g.y_max + 1, 20000)]),
+            np.concatenate(m.obstacles),                            # on the vertices
+            np.concatenate([(o + np.roll(o, -1, axis=0)) / 2 for o in m.obstacles])])
+        w = g._walls
+        brute = _distance_to_pieces(pts, w.piece_a, w.piece_u, w.piece_len)
+        brute = np.where(_in_fluid(g, pts), brute, -brute)
+        assert np.array_equal(wl.wall_distance(g, pts), brute), kind
+
+
+@pytest.mark.parametrize("array", ["square", "staggered"])
+def test_the_inlet_is_cut_off_by_a_whole_column_of_clogged_throats_and_nothing_less(array):
+    m = pillar_array(array, rows=3, columns=4, diameter=1.0, spacing=2.0, inlet_length=2.0,
+                     outlet_length=2.0)
+    t = find_throats(m.outline, m.obstacles)
+    x = np.round(t.midpoints[:, 0], 9)
+    across = np.abs(t.end[:, 1] - t.start[:, 1]) > np.abs(t.end[:, 0] - t.start[:, 0])
+    columns = sorted(set(x[across]))
+    assert len(columns) == 4
+    for c in columns:
+        cut = across & (x == c)
+        assert t.blocked(cut)
+        for k in np.flatnonzero(cut):                  # one gap open: a way through
+            assert not t.blocked(cut & (np.arange(len(t)) != k))
+    # every throat along the flow clogged (the gaps between the columns' pillars):
+    # the columns' gaps still lead through
+    assert not t.blocked(~across)
+    # every throat but one clogged: one gap alone is no way from inlet to outlet
+    assert all(t.blocked(np.arange(len(t)) != k) for k in range(len(t)))
+    # the time the inlet was cut off: when the last throat of the cut clogged
+    t_clog = np.where(across & (x == columns[1]), 1.0 + np.arange(len(t)) * 0.01, np.nan)
+    assert t.blocked_since(t_clog) == np.nanmax(t_clog)
+    assert np.isnan(t.blocked_since(np.where(t_clog == np.nanmax(t_clog), np.nan, t_clog)))
+
+
+def _column_jam(sim, column_x):
+    """A disk at rest in the mouth of every gap of the column at ``column_x``
+    (within a diameter of its throat, nearer to it than to any other): each of
+    those throats is found blocked at rest."""
+    gaps = [k for k in range(len(sim.throats))
+            if abs(sim.throats.midpoints[k, 0] - column_x) < 1e-9
+            and abs(sim.throats.end[k, 1] - sim.throats.start[k, 1]) > 0.5]
+    xs = [[column_x - 0.95, sim.throats.midpoints[k, 1]] for k in gaps]
+    return gaps, xs
+
+
+def test_a_column_clogged_by_hand_clogs_the_realization_and_one_gap_less_does_not():
+    column = 6.0 + 1.5 * 3.5
+    many = dict(MICRO, particles=[dict(MICRO["particles"][0], count=4)])
+    sim = make_sim(many)
+    gaps, xs = _column_jam(sim, column)
+    assert len(gaps) == 4
+    sim.set_state([xs])
+    result = sim.run()
+    row = result.summary["realizations"][0]
+    assert row["clogged"] and row["escapees"] == 0
+    # formed when its throats did: at the first check (nothing ever passed them);
+    # declared once it held for clog.window, where the run stops (run.stop_at_clog)
+    dt_check = sim.check_every * sim.dt
+    assert row["t_clog"] == pytest.approx(dt_check, rel=1e-9)
+    window = MICRO["clog"]["window"]
+    assert row["t_clog"] + window <= row["t_stop"] < row["t_clog"] + window + dt_check
+    net = result.summary["network"]["realizations"][0]
+    assert net["throats_clogged"] == 4 and net["t_cut"] == row["t_clog"]
+    assert result.network[0][2:] == (4, 0) and result.network[-1][2:] == (4, 4)
+    # three of the four gaps jammed (the disk of the fourth far upstream): open
+    sim = make_sim(many)
+    xs[-1] = [2.0, 0.0]
+    sim.set_state([xs])
+    result = sim.run()
+    assert not result.summary["realizations"][0]["clogged"]
+    assert result.summary["network"]["realizations"][0]["throats_clogged"] == 3
+
+
+def test_the_video_draws_each_clogged_throat_red_and_nothing_else():
+    from taichi_hsdem import render
+    from taichi_hsdem.render.overlay import CLOG_RED
+    from taichi_hsdem.render.video import VideoRecorder
+    ok, reason = render.vulkan_status()
+    if not ok:
+        pytest.skip(f"no off-screen rendering here: {reason}")
+    sim = make_sim(dict(MICRO, output={"width": 480}))
+    x, y = 6.0 + 1.5 * 3.5, sim.throats.midpoints[_throat(sim, 11.25, -1.75), 1]
+    k = _throat(sim, x, y)
+    sim.set_state([[[x - 0.9, y - 0.52], [x - 0.9, y + 0.52], [2.0, 0.0]]])
+    recorder = VideoRecorder(sim, None)
+    drawn = []
+    original = recorder.renderer.draw
+
+    def draw(*args, **kw):
+        drawn.append(original(*args, **kw))
+        return drawn[-1]
+    recorder.renderer.draw = draw
+    sim.run(on_frame=recorder, frame_times=[0.0, MICRO["run"]["t_end"]])
+    recorder.close(keep=False)
+    red = np.all(drawn[-1][:recorder.renderer.domain_height] == CLOG_RED, axis=-1)
+    assert not np.all(drawn[0] == CLOG_RED, axis=-1).any()      # nothing clogged at t = 0
+    col, row = recorder.renderer.world_to_pixel(sim.throats.midpoints[k:k + 1])[0]
+    assert red[int(row), int(col)]
+    # the bar spans the gap, nothing else is red
+    rows, cols = np.nonzero(red)
+    ends = recorder.renderer.world_to_pixel(np.stack([sim.throats.start[k], sim.throats.end[k]]))
+    assert cols.min() >= ends[:, 0].min() - 3 and cols.max() <= ends[:, 0].max() + 3
+    assert rows.min() >= ends[:, 1].min() - 3 and rows.max() <= ends[:, 1].max() + 3
+
+
+def test_obstacle_vertices_have_their_own_budget():
+    from taichi_hsdem.limits import MAX_OBSTACLE_VERTICES
+    geometry = dict(MICRO["geometry"], rows=40, columns=30, pillar_spacing=3.5)
+    # 1200 pillars of 24 sides (28,800 vertices): within the budget (was 2000 in all)
+    load_scene(dict(MICRO, geometry=geometry))
+    with pytest.raises(SceneError, match=r"geometry.pillar_sides: 1200 pillars of 48 sides "
+                                         r"have 57600 vertices, more than the 50000"):
+        load_scene(dict(MICRO, geometry=dict(geometry, pillar_sides=48)))
+    with pytest.raises(SceneError, match=r"geometry.rows: 50 x 41 = 2050 pillars, more than "
+                                         r"the 2000 obstacles"):
+        load_scene(dict(MICRO, geometry=dict(geometry, rows=50, columns=41, pillar_sides=8)))
+    assert MAX_OBSTACLE_VERTICES == 50_000
+    # a polygon scene: the obstacles' vertices together (each polygon within 2000)
+    outline = [[0.0, -1.0], [40.0, -1.0], [40.0, 1.0], [0.0, 1.0]]
+    rings = [[[1.0 + 1.2 * k + 0.4 * math.cos(a), 0.4 * math.sin(a)]
+              for a in np.linspace(0, 2 * math.pi, 1800, endpoint=False)] for k in range(30)]
+    poly = dict(MICRO, geometry={"kind": "polygon", "outline": outline, "obstacles": rings})
+    with pytest.raises(SceneError, match=r"geometry.obstacles: the obstacles have 54000 "
+                                         r"vertices, more than the 50000"):
+        load_scene(poly)

@@ -11,6 +11,16 @@ solid comes within ``(1 + GABRIEL_SLACK)`` times half its width of its midpoint
 of a square lattice, which cross the centre of a pore that four pillars keep at
 the same distance, whatever the polygon that stands for each circle.
 
+The pores are the Delaunay triangles of the same points, joined across every
+edge between two solids that is no throat (two neighbours with a third in
+between: one pore around them), and the inlet and the outlet are what lies
+beyond the triangulation's hull edges facing -x and +x; an edge between two
+points of one wall chain is wall. Each throat joins the pores on either side of
+the Delaunay edges of its pair of solids (:attr:`Throats.links`): crossing the
+gap between two solids is crossing one of them. With a set of throats clogged
+the inlet is cut off from the outlet (:meth:`Throats.blocked`) when every path of
+pores between them crosses a clogged throat.
+
 A geometry without obstacles has no throats here (its single constriction is
 ``Geometry.constriction_x0``).
 
@@ -20,6 +30,13 @@ A geometry without obstacles has no throats here (its single constriction is
 >>> t = find_throats(m.outline, m.obstacles)
 >>> len(t), round(float(t.widths.min()), 2)
 (25, 1.0)
+
+The first column's four gaps clogged cut the inlet off; three of them do not:
+
+>>> first = np.flatnonzero(np.isclose(t.midpoints[:, 0], 3.0))
+>>> clogged = np.isin(np.arange(len(t)), first)
+>>> len(first), t.blocked(clogged), t.blocked(clogged & (np.arange(len(t)) != first[0]))
+(4, True, False)
 """
 from __future__ import annotations
 
@@ -45,6 +62,12 @@ class Throats:
     start: np.ndarray
     end: np.ndarray
     solids: np.ndarray
+    #: the pore network (module notes): ``links`` (L, 2) join two pores (0 the
+    #: inlet, 1 the outlet, ``n_pores`` in all) across throat ``link_throat`` (L,)
+    #: (a throat's gap may span several Delaunay edges, each a link)
+    links: np.ndarray = None
+    link_throat: np.ndarray = None
+    n_pores: int = 2
 
     @property
     def midpoints(self) -> np.ndarray:
@@ -61,6 +84,36 @@ class Throats:
     def _tree(self):
         from scipy.spatial import cKDTree
         return cKDTree(self.midpoints)
+
+    def blocked(self, clogged) -> bool:
+        """Whether the throats ``clogged`` (T,) bool cut the inlet off from the
+        outlet: every path of pores between them crosses a clogged throat."""
+        from scipy.sparse import coo_array
+        from scipy.sparse.csgraph import connected_components
+        if self.links is None or not len(self):
+            return False
+        open_ = ~np.asarray(clogged, dtype=bool)[self.link_throat]
+        a, b = self.links[open_, 0], self.links[open_, 1]
+        graph = coo_array((np.ones(len(a)), (a, b)), shape=(self.n_pores, self.n_pores))
+        _, label = connected_components(graph, directed=False)
+        return bool(label[0] != label[1])
+
+    def blocked_since(self, t_clog) -> float:
+        """The earliest time at which the throats clogged by then (``t_clog`` (T,),
+        NaN: open) cut the inlet off from the outlet; NaN when they do not now."""
+        t_clog = np.asarray(t_clog, dtype=float)
+        clogged = np.isfinite(t_clog)
+        if not clogged.any() or not self.blocked(clogged):
+            return float("nan")
+        times = np.unique(t_clog[clogged])
+        lo, hi = 0, len(times) - 1          # blocked at times[hi]; find the first
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if self.blocked(clogged & (t_clog <= times[mid])):
+                hi = mid
+            else:
+                lo = mid + 1
+        return float(times[lo])
 
     def near(self, points, radius) -> tuple[np.ndarray, np.ndarray]:
         """(point index, throat index) of every throat whose segment may come
@@ -100,7 +153,8 @@ def find_throats(outline, obstacles) -> Throats:
     bound = np.array([np.hypot(*(p - c).T).max() for p, c in zip(polys, centroids)])
     walls = range(n_obs, len(solids))
     rows = []
-    for u, v in sorted(_neighbours(np.array(points), np.array(owner), n_obs)):
+    pairs_found, tri = _neighbours(np.array(points), np.array(owner), n_obs)
+    for u, v in sorted(pairs_found):
         p, q = _closest_pair(solids[u], solids[v])
         reach = (1.0 + GABRIEL_SLACK) * 0.5 * float(np.hypot(*(q - p)))
         mid = 0.5 * (p + q)
@@ -116,7 +170,8 @@ def find_throats(outline, obstacles) -> Throats:
     mid = 0.5 * (start + end)
     scale = float(np.ptp(outline, axis=0).max())
     order = np.lexsort((np.round(mid[:, 1] / scale, 9), np.round(mid[:, 0] / scale, 9)))
-    return Throats(start[order], end[order], pairs[order])
+    links, link_throat, n_pores = _pores(tri, np.array(owner), pairs[order])
+    return Throats(start[order], end[order], pairs[order], links, link_throat, n_pores)
 
 
 def observe(throats: Throats, x_before, alive_before, x, v, alive, rest_speed: float,
@@ -189,22 +244,83 @@ def _wall_chains(outline: np.ndarray) -> list:
     return [(a[c], b[c]) for c in chains]
 
 
-def _neighbours(points, owner, n_obs) -> set:
+def _neighbours(points, owner, n_obs) -> tuple[set, object]:
     """Pairs of solids (u < v, not both walls) joined by a Delaunay edge of
-    ``points`` (every pair when there are too few points to triangulate)."""
+    ``points`` (every pair when there are too few points to triangulate), and the
+    triangulation (None then)."""
     from scipy.spatial import Delaunay, QhullError
     try:
+        tri = Delaunay(points)
         edges = set()
-        for tri in Delaunay(points).simplices:
-            edges.update(itertools.combinations(sorted(tri), 2))
+        for simplex in tri.simplices:
+            edges.update(itertools.combinations(sorted(simplex), 2))
     except (QhullError, ValueError):   # fewer than 3 points, or all on one line
+        tri = None
         edges = set(itertools.combinations(range(len(points)), 2))
     pairs = set()
     for i, j in edges:
         u, v = sorted((int(owner[i]), int(owner[j])))
         if u != v and u < n_obs:
             pairs.add((u, v))
-    return pairs
+    return pairs, tri
+
+
+def _pores(tri, owner, pairs) -> tuple[np.ndarray, np.ndarray, int]:
+    """The pore network of the throats (``pairs`` (T, 2), their solids; module
+    notes): its links (L, 2) between pores (0 the inlet, 1 the outlet), the throat
+    each link crosses (L,), and the pore count. Without a triangulation every
+    throat joins the inlet to the outlet."""
+    T = len(pairs)
+    if tri is None:
+        return np.tile([0, 1], (T, 1)), np.arange(T), 2
+    throat_of = {(int(u), int(v)): k for k, (u, v) in enumerate(pairs)}
+    n_tri = len(tri.simplices)
+    parent = list(range(n_tri + 2))          # triangle t is node t + 2
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    joins = []                               # (node, node, throat)
+    pts = tri.points
+    for t, simplex in enumerate(tri.simplices):
+        for corner in range(3):
+            i, j = (int(simplex[(corner + 1) % 3]), int(simplex[(corner + 2) % 3]))
+            other = int(tri.neighbors[t, corner])
+            if other >= 0 and other < t:
+                continue                     # each inner edge once
+            u, v = sorted((int(owner[i]), int(owner[j])))
+            if u == v:
+                continue                     # along one wall: no way through
+            if other >= 0:
+                beyond = other + 2
+            else:
+                # a hull edge: the inlet or the outlet lies beyond it, on the side
+                # its outward normal points to (none for a wall's own edge)
+                edge = pts[j] - pts[i]
+                normal = np.array([edge[1], -edge[0]])
+                if np.dot(normal, pts[i] - pts[int(simplex[corner])]) < 0:
+                    normal = -normal
+                if abs(normal[0]) <= 1e-9 * np.hypot(*normal):
+                    continue
+                beyond = 0 if normal[0] < 0 else 1
+            k = throat_of.get((u, v))
+            if k is None:
+                parent[find(t + 2)] = find(beyond)       # a free way: one pore
+            else:
+                joins.append((t + 2, beyond, k))
+    roots = {}
+    for a in (0, 1):
+        roots.setdefault(find(a), len(roots))
+    links = np.array([(roots.setdefault(find(a), len(roots)),
+                       roots.setdefault(find(b), len(roots))) for a, b, _ in joins],
+                     dtype=int).reshape(-1, 2)
+    link_throat = np.array([k for _, _, k in joins], dtype=int)
+    # a link inside one pore joins nothing
+    keep = links[:, 0] != links[:, 1]
+    return links[keep], link_throat[keep], len(roots)
 
 
 def _distance(point, solid) -> float:

@@ -35,6 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .nearest import ObstacleIndex
 from .polygon import (CHUNK_ELEMENTS, clipped_area, cross, crossings, first_crossing,
                       points_in_polygon, segments_intersect, signed_area)
 
@@ -56,6 +57,8 @@ class _WallData(NamedTuple):
     inlet: np.ndarray       # (k, 2) y intervals of the inlet edges
     outlet: np.ndarray      # (k, 2) y intervals of the outlet edges
     corners: np.ndarray     # (C, 2) every outline and obstacle vertex
+    outline_pieces: tuple   # (start, unit, length) of the outline's walls and rays
+    index: object           # ObstacleIndex of the obstacles (nearest.py), None without
 
 
 @dataclass(frozen=True, eq=False)
@@ -344,8 +347,15 @@ def wall_distance(geometry: Geometry, points) -> np.ndarray:
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
     w = geometry._walls
-    dist = _distance_to_pieces(pts, w.piece_a, w.piece_u, w.piece_len)
-    return np.where(_in_fluid(geometry, pts), dist, -dist)
+    if w.index is None:
+        dist = _distance_to_pieces(pts, w.piece_a, w.piece_u, w.piece_len)
+        return np.where(_in_fluid(geometry, pts), dist, -dist)
+    # the outline in full, the obstacles near each point only (nearest.py: the
+    # same values as measuring every obstacle edge)
+    dist = _distance_to_pieces(pts, *w.outline_pieces)
+    d2, inside = w.index.query(pts, dist)
+    dist = np.minimum(dist, np.sqrt(d2))
+    return np.where(_in_fluid(geometry, pts, inside), dist, -dist)
 
 
 def fluid_area(geometry: Geometry, x0: float, x1: float) -> float:
@@ -516,14 +526,21 @@ def _wall_data(outline, obstacles, x_min, x_max) -> _WallData:
     piece_u = np.concatenate([seg / seg_len[:, None]] + ray_u)
     piece_len = np.concatenate([seg_len, np.full(2 * (len(inlet) + len(outlet)), np.inf)])
     corners = np.concatenate([outline, *obstacles])
+    n_wall = int((~open_edge).sum())
+    rays = slice(len(wall_a), None)
+    outline_pieces = tuple(np.ascontiguousarray(np.concatenate([x[:n_wall], x[rays]]))
+                           for x in (piece_a, piece_u, piece_len))
     data = _WallData(wall_a, wall_b, piece_a, piece_u, piece_len, np.concatenate(edge_a),
-                     np.concatenate(edge_b), inlet, outlet, corners)
-    for arr in data:
+                     np.concatenate(edge_b), inlet, outlet, corners, outline_pieces,
+                     ObstacleIndex(obstacles) if len(obstacles) else None)
+    for arr in (*data[:10], *outline_pieces):
         arr.setflags(write=False)
     return data
 
 
-def _in_fluid(geometry: Geometry, pts: np.ndarray) -> np.ndarray:
+def _in_fluid(geometry: Geometry, pts: np.ndarray, in_obstacle=None) -> np.ndarray:
+    """Inside the fluid region; ``in_obstacle`` (per point), when given, says which
+    points lie inside an obstacle, so that only the outline's edges are crossed."""
     w = geometry._walls
     x, y = pts[:, 0], pts[:, 1]
     res = np.zeros(len(pts), dtype=bool)
@@ -533,7 +550,13 @@ def _in_fluid(geometry: Geometry, pts: np.ndarray) -> np.ndarray:
     mid = (x > geometry.x_min) & (x < geometry.x_max)
     # Even-odd over outline and obstacle edges together: inside the outline and
     # outside every (disjoint, strictly interior) obstacle.
-    res[mid] = crossings(pts[mid], w.edge_a, w.edge_b) % 2 == 1
+    if in_obstacle is None:
+        res[mid] = crossings(pts[mid], w.edge_a, w.edge_b) % 2 == 1
+    else:
+        # obstacles lie disjoint and strictly inside: an outside one adds an even count
+        n = len(geometry.outline)
+        odd = crossings(pts[mid], w.edge_a[:n], w.edge_b[:n]) % 2 == 1
+        res[mid] = odd ^ in_obstacle[mid]
     return res
 
 
@@ -565,6 +588,11 @@ def _width(geometry: Geometry, x: float) -> float:
 
 def _check_obstacles(outline: np.ndarray, obstacles: tuple, tol: float) -> None:
     oa, ob = _edges(outline)
+    # two obstacles whose boxes (widened by tol) are apart can neither meet nor
+    # nest: only the others are tested, so the check grows with the obstacles,
+    # not with their square
+    lo = np.array([o.min(axis=0) for o in obstacles]).reshape(-1, 2) - tol
+    hi = np.array([o.max(axis=0) for o in obstacles]).reshape(-1, 2) + tol
     for k, obs in enumerate(obstacles):
         ka, kb = _edges(obs)
         inside = points_in_polygon(obs, outline)
@@ -572,7 +600,8 @@ def _check_obstacles(outline: np.ndarray, obstacles: tuple, tol: float) -> None:
         _require(bool(inside.all()) and not touch,
                  f"obstacle {k}: must lie strictly inside the outline (not crossing or "
                  f"touching it)")
-        for m in range(k):
+        near = np.flatnonzero(np.all((lo[:k] <= hi[k]) & (hi[:k] >= lo[k]), axis=1))
+        for m in near:
             other = obstacles[m]
             ma, mb = _edges(other)
             meet = segments_intersect(ka[:, None], kb[:, None], ma[None], mb[None], tol).any()

@@ -10,6 +10,7 @@ import numpy as np
 from scipy import ndimage
 
 from .frame import Renderer, finite_range
+from .overlay import CLOG_RED, network_label, paint_label, paint_segments
 
 
 class VideoWriter:
@@ -103,6 +104,10 @@ class VideoRecorder:
     strip under each frame prints the unit (Pa, or "dimensionless" for a
     dimensionless scene) and the range next to the colour bar; :meth:`summary`
     reports the final range.
+
+    With several throats (a micromodel) every clogged throat is drawn as a red bar
+    across its gap, and the corner of the domain prints the pressure drop of the
+    latest solve and how many throats are clogged (:mod:`.overlay`).
 
     The file is written as ``<name>.part.mp4`` and renamed by
     ``close(keep=True)``. A frame that fails to render stops the video (the run
@@ -201,6 +206,8 @@ class VideoRecorder:
             esc = int(sim.escaped()[r])
             frame = self.renderer.draw(st["x"][r], st["theta"][r], st["species"],
                                        st["alive"][r], pressure=pres, t=sim.t, escapees=esc)
+            if len(sim.throats) >= 2:
+                self._draw_network(sim, frame)
             if self.writer is not None:
                 self.writer.write(frame)
         except Exception as exc:        # a broken video must not lose the run
@@ -216,6 +223,21 @@ class VideoRecorder:
                 print(f"--view stopped: the window failed ({type(exc).__name__}: {exc}); "
                       "the run goes on", file=sys.stderr)
                 self.viewer = None
+
+    def _draw_network(self, sim, frame):
+        """The clogged throats (red bars) and the label of :mod:`.overlay`."""
+        r, rend = self.r, self.renderer
+        clogged = np.isfinite(sim.run_state.throat_t_clog[r])
+        th = sim.throats
+        domain = frame[:rend.domain_height]
+        if clogged.any():
+            ends = np.stack([rend.world_to_pixel(th.start[clogged]),
+                             rend.world_to_pixel(th.end[clogged])], axis=1)
+            paint_segments(domain, ends, max(1.5, rend.width / 320), CLOG_RED)
+        drop = next((row[2] for row in reversed(sim.run_state.flow) if row[0] == r), None)
+        unit = "" if rend.pressure_unit == "dimensionless" else rend.pressure_unit
+        paint_label(domain, network_label(int(clogged.sum()), len(th), drop, unit),
+                    max(1, rend._scale - 1))
 
     def summary(self, wall_time_s: float) -> dict:
         """``summary.json``'s ``"video"`` entry; ``wall_time_s`` is the run's

@@ -76,7 +76,7 @@ from .keys import (
     shape_vertex_count,
     vtk_indices,
 )
-from ..limits import MAX_OUTLINE_VERTICES
+from ..limits import MAX_OBSTACLE_VERTICES, MAX_OUTLINE_VERTICES
 from .toml import parse_override_value, read_toml
 
 __all__ = ["Scene", "load_scene"]
@@ -257,11 +257,18 @@ def _check_micromodel(v: dict, out: Problems) -> None:
         out.add("geometry.diameter_spread", f"applies to pillar_array = \"random\" only "
                 f"(the {v['pillar_array']} array's pillars are all pillar_diameter)")
         return
-    total = 4 + v["rows"] * v["columns"] * v["pillar_sides"]
-    if total > MAX_OUTLINE_VERTICES:
-        out.add("geometry.pillar_sides", f"{v['rows']} x {v['columns']} pillars of "
-                f"{v['pillar_sides']} sides have {total} vertices, more than the "
-                f"{MAX_OUTLINE_VERTICES} a run can afford; use fewer sides or pillars")
+    # the resolved scene holds the pillars as geometry.obstacles: within its bounds
+    pillars = v["rows"] * v["columns"]
+    if pillars > MAX_OUTLINE_VERTICES:
+        out.add("geometry.rows", f"{v['rows']} x {v['columns']} = {pillars} pillars, more "
+                f"than the {MAX_OUTLINE_VERTICES} obstacles a scene may hold; use fewer "
+                "rows or columns")
+        return
+    total = pillars * v["pillar_sides"]
+    if v["pillar_sides"] > MAX_OUTLINE_VERTICES or total > MAX_OBSTACLE_VERTICES:
+        out.add("geometry.pillar_sides", f"{pillars} pillars of {v['pillar_sides']} sides "
+                f"have {total} vertices, more than the {MAX_OBSTACLE_VERTICES} a run can "
+                f"afford (at most {MAX_OUTLINE_VERTICES} each); use fewer sides or pillars")
         return
     try:
         array_of(v)
@@ -289,11 +296,13 @@ def _check_polygon_outline(v: dict, out: Problems) -> None:
                 f"({show(x_min)}, {show(x_max)}), got {show(v['constriction_x'])}")
     if not good(v["obstacles"]):
         return
-    total = n + sum(len(obstacle) for obstacle in v["obstacles"])
-    if total > MAX_OUTLINE_VERTICES:
-        out.add("geometry.obstacles", f"the outline and obstacles have {total} vertices, "
-                f"more than the {MAX_OUTLINE_VERTICES} a run can afford (the wall level set "
-                "and these checks grow with them); simplify them")
+    # the outline is measured in full from every wall node, the obstacles only near
+    # each one (geometry/nearest.py): a budget of their own (each polygon within
+    # MAX_OUTLINE_VERTICES, its key's bound)
+    total = sum(len(obstacle) for obstacle in v["obstacles"])
+    if total > MAX_OBSTACLE_VERTICES:
+        out.add("geometry.obstacles", f"the obstacles have {total} vertices, more than the "
+                f"{MAX_OBSTACLE_VERTICES} a run can afford; simplify them or use fewer")
         return
     a, b = np.asarray(outline), np.roll(outline, -1, axis=0)
     for k, obstacle in enumerate(v["obstacles"]):
