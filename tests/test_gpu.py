@@ -37,6 +37,7 @@ import pytest
 
 import gpu_cases
 from conftest import both_precisions, precision
+from kmath_kernel import kmath_values
 from taichi_hsdem import backend
 
 pytestmark = pytest.mark.gpu
@@ -88,27 +89,11 @@ def test_kernel_trigonometry_against_numpy():
     # kmath.sin_cos and exp_neg on this backend (no backend sin/cos/exp in kernels):
     # f64 within 1.1 ulp (measured 1.02 on Mesa's Vulkan, 0.84 on the CPU), f32
     # within 2^-23 absolute (measured 8.4e-8)
-    ti = backend.ti
-    from taichi_hsdem.dem import kmath
-
-    @ti.kernel
-    def k(x: ti.types.ndarray(), c: ti.types.ndarray(), s: ti.types.ndarray(),
-          e: ti.types.ndarray()):
-        for i in x:
-            c[i], s[i] = kmath.sin_cos(x[i])
-            e[i] = kmath.exp_neg(ti.abs(x[i]) * 0.01)
-
     real = backend.numpy_real()
     rng = np.random.default_rng(3)
     x = np.concatenate([rng.uniform(-4, 4, 200_000), rng.uniform(-1e3, 1e3, 50_000),
                         np.arange(-2000, 2000) * (np.pi / 2)]).astype(real)
-    arrays = [backend.ti.ndarray(backend.real(), x.size) for _ in range(4)]
-    arrays[0].from_numpy(x)
-    k(*arrays)
-    c, s, e = (a.to_numpy() for a in arrays[1:])
-    xl = x.astype(np.longdouble)
-    ref_e = np.exp(-(np.abs(x) * real(0.01)).astype(np.longdouble))
-    for got, ref in ((c, np.cos(xl)), (s, np.sin(xl)), (e, ref_e)):
+    for got, ref in kmath_values(x):   # cos, sin, exp
         keep = ref != 0
         err = np.abs(got[keep].astype(np.longdouble) - ref[keep])
         if real is np.float64:

@@ -4,7 +4,8 @@ the backend's, which SPIR-V has in float32 only) against numpy's long double.
 Measured on the CPU over 3.5 million angles up to 1.6e6 rad: float64 sin/cos
 within 0.84 ulp, exp within 1.08 ulp; float32 sin/cos within 8.4e-8 absolute,
 exp within 1.16 ulp (Mesa's Vulkan: 1.02 ulp for float64 sin/cos,
-tests/test_gpu.py). Asserted: 0.9 ulp, 1.1 ulp, 2^-23 absolute, 1.2 ulp.
+tests/test_gpu.py; both run the kernel of tests/kmath_kernel.py). Asserted: 0.9
+ulp, 1.1 ulp, 2^-23 absolute, 1.2 ulp.
 """
 import subprocess
 import sys
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 
 from conftest import precision
+from kmath_kernel import kmath_values
 from taichi_hsdem import backend
 
 pytestmark = pytest.mark.skipif(np.finfo(np.longdouble).nmant < 60,
@@ -22,16 +24,6 @@ pytestmark = pytest.mark.skipif(np.finfo(np.longdouble).nmant < 60,
 def errors(n=400_000, seed=11):
     """(sin/cos error, exp error) of kmath on this process's kernels: in ulps for
     float64, absolute (sin/cos) and ulps (exp) for float32."""
-    ti = backend.ti
-    from taichi_hsdem.dem import kmath
-
-    @ti.kernel
-    def k(x: ti.types.ndarray(), c: ti.types.ndarray(), s: ti.types.ndarray(),
-          e: ti.types.ndarray()):
-        for i in x:
-            c[i], s[i] = kmath.sin_cos(x[i])
-            e[i] = kmath.exp_neg(ti.abs(x[i]) * 0.01)
-
     real = backend.numpy_real()
     rng = np.random.default_rng(seed)
     x = np.concatenate([rng.uniform(-4, 4, n), rng.uniform(-1e3, 1e3, n // 4),
@@ -39,17 +31,11 @@ def errors(n=400_000, seed=11):
                         np.arange(-4000, 4000) * (np.pi / 2)]).astype(real)
     if real is np.float64:
         x = np.concatenate([x, rng.uniform(-1.6e6, 1.6e6, n // 8)])
-    arrays = [ti.ndarray(backend.real(), x.size) for _ in range(4)]
-    arrays[0].from_numpy(x)
-    k(*arrays)
-    c, s, e = (a.to_numpy() for a in arrays[1:])
-    xl = x.astype(np.longdouble)
     out = []
-    for got, ref in ((c, np.cos(xl)), (s, np.sin(xl)),
-                     (e, np.exp(-(np.abs(x) * real(0.01)).astype(np.longdouble)))):
-        keep = (ref != 0) & (np.abs(x) < 4000 if got is e else True)
+    for name, (got, ref) in zip(("cos", "sin", "exp"), kmath_values(x)):
+        keep = (ref != 0) & (np.abs(x) < 4000 if name == "exp" else True)
         err = np.abs(got[keep].astype(np.longdouble) - ref[keep])
-        if real is np.float64 or got is e:
+        if real is np.float64 or name == "exp":
             err = err / np.spacing(np.abs(ref[keep]).astype(real)).astype(np.longdouble)
         out.append(float(err.max()))
     return max(out[:2]), out[2]

@@ -28,11 +28,21 @@ sphere packings. It fills only the lens round the contact point, where a film
 thinner than 0.1 r passes a negligible flux (lubrication: ~ gap^(5/2)).
 
 Only this module imports NGSolve; :func:`require` says how to install it.
+
+The last section holds what tools/stokes_sphere_gap.py and
+tools/stokes_sphere_lattice.py share: one sphere at mid-gap in a box, its mesh
+refined over the films, the fixed and the moving problem on one LU, and a table of
+runs (each run's JSON cached by its settings, a CSV with ``#`` comment lines).
 """
 from __future__ import annotations
 
+import csv
+import json
+import math
+import pathlib
+import sys
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -529,3 +539,251 @@ def gap_average(solution, xy, gap, half_thickness, n_gauss=6):
                     / np.where(wsum > 0, wsum, 1.0), np.nan)
     missed = 1.0 - found.sum() / max(int(use.sum()), 1)
     return pbar, float(missed)
+
+
+# ------------------------------------------------- one sphere at mid-gap (two tools)
+
+def mesh_label(h_far, h_part, h_film, order):
+    """Element sizes and order as ``h_far/h_part/h_film P_order``."""
+    return f"{h_far:g}/{h_part:g}/{h_film:g} P{order}"
+
+
+class MeshSettings:
+    """What the two tools' ``Settings`` share: element sizes ``h_far``, ``h_part``,
+    ``h_film`` and the velocity ``order`` (attributes of the dataclass)."""
+
+    def mesh_label(self):
+        return mesh_label(self.h_far, self.h_part, self.h_film, self.order)
+
+    def mesh_tag(self):
+        """The sizes and order in a file name (the end of ``tag()``)."""
+        return f"h{self.h_far:g}_{self.h_part:g}_{self.h_film:g}_p{self.order}"
+
+
+def film_points(a, delta, h_film, phimax=math.pi, rings=8):
+    """Points and sizes that cap the mesh over the lubrication film to the plate.
+
+    For a sphere of radius ``a`` centred on the z axis whose apex is ``delta``
+    from the plate ``z = 0``.
+
+    Returns
+    -------
+    list of tuple
+        ``(x, y, z, h)``. There are ``rings`` radii ``rho`` up to ``min(0.95 a,
+        sqrt(8 a delta))``, each spread over the arc ``0 <= angle <= phimax`` (the
+        half circle ``y >= 0`` by default) at mid-film height ``z = h(rho)/2``,
+        with size ``h_film h(rho)``, ``h(rho) = delta + a - sqrt(a^2 - rho^2)``.
+    """
+    rho_max = min(0.95 * a, math.sqrt(8.0 * a * max(delta, 0.0)))
+    out = []
+    for rho in np.linspace(0.0, rho_max, rings):
+        film = delta + a - math.sqrt(max(a * a - rho * rho, 0.0))
+        size = h_film * film
+        n_phi = int(math.ceil(phimax * rho / size)) + 1 if rho > 0 else 1
+        for ang in np.linspace(0.0, phimax, n_phi):
+            out.append((rho * math.cos(ang), max(rho * math.sin(ang), 0.0), 0.5 * film, size))
+    return out
+
+
+def sphere_box_mesh(s, ng, occ, lo, hi, faces, phimax=math.pi, periodic_x=False):
+    """Curved tetrahedral mesh of the box ``lo``-``hi`` less the sphere of diameter
+    ``s.dh`` centred at ``(0, 0, 1/2)`` (mid-gap of a cell ``H = 1``).
+
+    Parameters
+    ----------
+    s : settings
+        ``dh``; element sizes ``h_far`` (over ``H``), ``h_part`` (on the sphere,
+        over its radius ``a``), ``h_film`` (over the film's local thickness, at
+        :func:`film_points` with ``phimax``); ``order``, that of the geometry.
+    ng, occ : modules
+        :func:`require`'s.
+    lo, hi : tuple of 3 float
+        The box's corners.
+    faces : tuple of 6 str
+        Names of the box's faces x min, x max, y min, y max, z min, z max; the
+        sphere's is ``particle``.
+    periodic_x : bool
+        Identify the fluid's x min and x max faces (periodic spaces).
+    """
+    from netgen.meshing import MeshingParameters  # present once require() passed
+
+    a = 0.5 * s.dh
+    box = occ.Box(occ.Pnt(*lo), occ.Pnt(*hi))
+    for i, name in enumerate(faces):
+        side = box.faces.Max if i % 2 else box.faces.Min
+        side((occ.X, occ.Y, occ.Z)[i // 2]).name = name
+    sphere = occ.Sphere(occ.Pnt(0, 0, 0.5), a)
+    sphere.faces.name = "particle"
+    sphere.faces.maxh = s.h_part * a
+    fluid = box - sphere
+    if periodic_x:
+        fluid.faces.Min(occ.X).Identify(fluid.faces.Max(occ.X), "px",
+                                        occ.IdentificationType.PERIODIC)
+    mp = MeshingParameters(maxh=s.h_far, grading=0.3)
+    for x, y, z, h in film_points(a, 0.5 - a, s.h_film, phimax):
+        mp.RestrictH(x, y, z, h=h)
+    mesh = ng.Mesh(occ.OCCGeometry(fluid).GenerateMesh(mp=mp))
+    if s.order > 1:
+        mesh.Curve(s.order)
+    return mesh
+
+
+def solve_fixed_moving(ng, X, form, inv, rhs, particle, unit):
+    """The held and the moving sphere's problems on one factorisation.
+
+    Parameters
+    ----------
+    X : ngsolve space
+        Velocity first (``components[0]``).
+    form : ngsolve.BilinearForm
+        Assembled; ``inv`` its inverse on ``X.FreeDofs()``.
+    rhs : dict
+        ``{"fixed": LinearForm, "moving": LinearForm}``, assembled here.
+    particle : ngsolve region
+        The sphere's faces.
+    unit : ngsolve.CoefficientFunction
+        The moving sphere's velocity, ``e_x`` (on ``components[0]``).
+
+    Returns
+    -------
+    fields : dict
+        ``{"fixed": GridFunction, "moving": GridFunction}``.
+    w : ngsolve.GridFunction
+        ``unit`` on the sphere's degrees of freedom, zero elsewhere (the reaction
+        force's test field).
+    """
+    for f in rhs.values():
+        f.Assemble()
+    fields = {}
+    for key in ("fixed", "moving"):
+        g = ng.GridFunction(X)
+        if key == "moving":
+            g.components[0].Set(unit, definedon=particle)
+        res = rhs[key].vec.CreateVector()
+        res.data = rhs[key].vec - form.mat * g.vec
+        g.vec.data += inv * res
+        fields[key] = g
+    w = ng.GridFunction(X)
+    w.components[0].Set(unit, definedon=particle)
+    return fields, w
+
+
+def run_sphere(s, threads, verbose, build_mesh, solve, note="", labels=None):
+    """Mesh and solve one run of either tool; returns the JSON-ready record.
+
+    ``build_mesh(s, ng, occ)`` meshes (``verbose``: a line with the tets and the
+    seconds, headed ``note``); ``solve(mesh, ng)`` returns the run's results (a
+    dict) and the solve's ``info`` (with ``ndof``). To the results are added
+    ``settings`` (``asdict(s)``), ``mesh`` (``s.mesh_label()``), ``labels``,
+    ``ndof``, ``solve`` (``info``), ``t_mesh`` and ``wall_s``.
+    """
+    ng, occ = require(threads)
+    t0 = time.perf_counter()
+    mesh = build_mesh(s, ng, occ)
+    t_mesh = time.perf_counter() - t0
+    if verbose:
+        print(f"  {note}mesh {mesh.ne} tets, {t_mesh:.1f} s", flush=True)
+    out, info = solve(mesh, ng)
+    out.update(settings=asdict(s), mesh=s.mesh_label(), **(labels or {}), ndof=info["ndof"],
+               solve=info, t_mesh=t_mesh, wall_s=time.perf_counter() - t0)
+    return out
+
+
+def cached_run(s, runs_dir, run, summary):
+    """``run(s)``, or the JSON of an earlier run of the same settings in ``runs_dir``.
+
+    Parameters
+    ----------
+    s : dataclass
+        The settings; ``s.tag()`` names the JSON, which is reused only when its
+        ``settings`` are ``asdict(s)``.
+    runs_dir : path or None
+        The cache (``None``: none, always solve).
+    run : callable
+        ``run(s)`` solves, returning a JSON-ready dict with ``ndof`` and ``wall_s``.
+    summary : str
+        A format of the run's keys, printed with ``ndof`` and the seconds after a
+        new solve.
+    """
+    path = None
+    if runs_dir is not None:
+        path = pathlib.Path(runs_dir) / f"{s.tag()}.json"
+        if path.exists():
+            rec = json.loads(path.read_text())
+            if rec.get("settings") == asdict(s):
+                return rec
+    print(f"solving {s.tag()}", flush=True)
+    rec = run(s)
+    print(f"  {summary.format_map(rec)}  ndof {rec['ndof']}  {rec['wall_s']:.0f} s", flush=True)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(rec, indent=1))
+    return rec
+
+
+def print_run(rec, summary, out=None):
+    """Print a single run's ``summary`` (a dict) as JSON; write its whole record
+    ``rec`` to the file ``out`` (JSON) when given."""
+    print(json.dumps(summary, indent=1))
+    if out:
+        pathlib.Path(out).write_text(json.dumps(rec, indent=1))
+
+
+def write_table(path, comments, columns, rows):
+    """Write a CSV: each of ``comments`` on a line ``# ...``, the ``columns``, the ``rows``
+    (lists of cells, written as given)."""
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as fh:
+        for line in comments:
+            fh.write(f"# {line}\n")
+        wr = csv.writer(fh, lineterminator="\n")
+        wr.writerow(columns)
+        wr.writerows(rows)
+
+
+def read_table(path, text=()):
+    """A CSV of :func:`write_table`'s as a list of rows in file order: dicts of floats,
+    but the strings of the columns ``text``."""
+    with open(path) as fh:
+        return [{k: (v if k in text else float(v)) for k, v in row.items()}
+                for row in csv.DictReader(line for line in fh if not line.startswith("#"))]
+
+
+def add_run_options(ap, presets, data_csv, table, axis, label, checks):
+    """The single run's and the table's options of both tools' command lines.
+
+    ``--quick --preset --out``, then ``--table --checks --table-<axis> --csv
+    --runs``: ``table`` names the tool's list of the table's values of ``label``
+    (``--table-<axis>`` replaces it), ``checks`` what ``--checks`` adds, and
+    ``data_csv`` is ``--csv``'s default.
+    """
+    ap.add_argument("--quick", action="store_true", help="the coarse 'quick' preset")
+    ap.add_argument("--preset", choices=sorted(presets), help="a named preset (default table)")
+    ap.add_argument("--out", help="JSON of a single run")
+    ap.add_argument("--table", action="store_true", help=f"solve {table} and write the CSV")
+    ap.add_argument("--checks", action="store_true", help=f"with --table: {checks}")
+    ap.add_argument(f"--table-{axis}",
+                    help=f"with --table: comma-separated {label} instead of {table}")
+    ap.add_argument("--csv", default=str(data_csv), help="with --table (%(default)s)")
+    ap.add_argument("--runs", help="folder for each solve's JSON (reused when settings match)")
+
+
+def add_mesh_options(ap):
+    """The element-size, order and thread options of both tools' command lines."""
+    ap.add_argument("--hfar", type=float, help="element size far away / H")
+    ap.add_argument("--hpart", type=float, help="on the sphere / a")
+    ap.add_argument("--hfilm", type=float, help="in the film / local film thickness")
+    ap.add_argument("--order", type=int, help="velocity order k (P_k/P_(k-1))")
+    ap.add_argument("--threads", type=int, default=1, help="NGSolve threads (%(default)s)")
+
+
+def extra_missing(tool, threads):
+    """:func:`require` with ``threads``; ``True`` (after one line on stderr, headed
+    ``tool``) when NGSolve is missing."""
+    try:
+        require(threads)
+    except MissingExtra as exc:
+        print(f"{tool}: {exc}", file=sys.stderr)
+        return True
+    return False

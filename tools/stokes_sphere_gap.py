@@ -103,10 +103,7 @@ most), a ``check_domain`` one up to 7 minutes and 9 GB, a ``quick`` one 6-60 s;
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
-import json
-import math
 import pathlib
 import shlex
 import sys
@@ -132,7 +129,7 @@ CSV_COLUMNS = ("d_over_H", "drift_ratio", "dipole_free", "dipole_fixed", "dipole
 
 
 @dataclasses.dataclass(frozen=True)
-class Settings:
+class Settings(stokes_fem.MeshSettings):
     """One solve. Lengths over ``H``; ``W``, ``L`` over ``ell = max(d, 0.7 H)``.
 
     Attributes
@@ -163,15 +160,11 @@ class Settings:
     def ell(self):
         return max(self.dh, 0.7)
 
-    def mesh_label(self):
-        return f"{self.h_far:g}/{self.h_part:g}/{self.h_film:g} P{self.order}"
-
     def domain_label(self):
         return f"W={self.W:g}ell L={self.L:g}ell {self.sidewall}"
 
     def tag(self):
-        return (f"dh{self.dh:g}_W{self.W:g}_L{self.L:g}_{self.sidewall}_"
-                f"h{self.h_far:g}_{self.h_part:g}_{self.h_film:g}_p{self.order}")
+        return f"dh{self.dh:g}_W{self.W:g}_L{self.L:g}_{self.sidewall}_{self.mesh_tag()}"
 
 
 # Presets (mesh and domain; d/H is given separately). "table" is the CSV's;
@@ -194,54 +187,16 @@ def preset(name, dh, **overrides):
 
 # --------------------------------------------------------------------------- mesh
 
-def film_points(a, delta, h_film, rings=8):
-    """Points and sizes capping the mesh over the lubrication region.
-
-    Returns
-    -------
-    list of tuple
-        ``(x, y, z, h)``: at ``rings`` radii ``rho`` up to ``min(0.95 a,
-        sqrt(8 a delta))``, spread over the half circle ``y >= 0`` at mid-film
-        height ``z = h(rho)/2``, size ``h_film h(rho)``.
-    """
-    rho_max = min(0.95 * a, math.sqrt(8.0 * a * max(delta, 0.0)))
-    out = []
-    for rho in np.linspace(0.0, rho_max, rings):
-        film = delta + a - math.sqrt(max(a * a - rho * rho, 0.0))
-        size = h_film * film
-        n_phi = int(math.ceil(math.pi * rho / size)) + 1 if rho > 0 else 1
-        for phi in np.linspace(0.0, math.pi, n_phi):
-            out.append((rho * math.cos(phi), max(rho * math.sin(phi), 0.0), 0.5 * film, size))
-    return out
-
-
 def build_mesh(s: Settings, ng, occ):
-    """The quarter domain's curved tetrahedral mesh.
+    """The quarter domain's curved tetrahedral mesh (refined over the film:
+    ``stokes_fem.film_points``).
 
     Faces: ``inlet`` (x = -L), ``outlet`` (x = L), ``sym`` (y = 0), ``wall``
     (y = W), ``plate`` (z = 0), ``mid`` (z = H/2), ``particle``.
     """
-    from netgen.meshing import MeshingParameters  # present once require() passed
-
-    a = 0.5 * s.dh
     W, L = s.W * s.ell, s.L * s.ell
-    box = occ.Box(occ.Pnt(-L, 0, 0), occ.Pnt(L, W, 0.5))
-    box.faces.Min(occ.X).name = "inlet"
-    box.faces.Max(occ.X).name = "outlet"
-    box.faces.Min(occ.Y).name = "sym"
-    box.faces.Max(occ.Y).name = "wall"
-    box.faces.Min(occ.Z).name = "plate"
-    box.faces.Max(occ.Z).name = "mid"
-    sphere = occ.Sphere(occ.Pnt(0, 0, 0.5), a)
-    sphere.faces.name = "particle"
-    sphere.faces.maxh = s.h_part * a
-    mp = MeshingParameters(maxh=s.h_far, grading=0.3)
-    for x, y, z, h in film_points(a, 0.5 - a, s.h_film):
-        mp.RestrictH(x, y, z, h=h)
-    mesh = ng.Mesh(occ.OCCGeometry(box - sphere).GenerateMesh(mp=mp))
-    if s.order > 1:
-        mesh.Curve(s.order)
-    return mesh
+    return stokes_fem.sphere_box_mesh(s, ng, occ, (-L, 0, 0), (L, W, 0.5),
+                                      ("inlet", "outlet", "sym", "wall", "plate", "mid"))
 
 
 # -------------------------------------------------------------------------- solve
@@ -275,20 +230,8 @@ def solve_pair(mesh, s: Settings, ng, p_drop):
 
     rhs = {"fixed": ng.LinearForm(X), "moving": ng.LinearForm(X)}
     rhs["fixed"] += -p_drop * (v * n) * ng.ds("inlet")
-    for f in rhs.values():
-        f.Assemble()
-    fields = {}
-    for key in ("fixed", "moving"):
-        g = ng.GridFunction(X)
-        if key == "moving":
-            g.components[0].Set(ng.CF((1, 0, 0)), definedon=mesh.Boundaries("particle"))
-        res = rhs[key].vec.CreateVector()
-        res.data = rhs[key].vec - form.mat * g.vec
-        g.vec.data += inv * res
-        fields[key] = g
-
-    w = ng.GridFunction(X)
-    w.components[0].Set(ng.CF((1, 0, 0)), definedon=mesh.Boundaries("particle"))
+    fields, w = stokes_fem.solve_fixed_moving(ng, X, form, inv, rhs, mesh.Boundaries("particle"),
+                                              ng.CF((1, 0, 0)))
     info = {"ndof": X.ndof, "elements": mesh.ne, "t_assemble": t1 - t0, "t_factor": t2 - t1}
     for key, g in fields.items():
         r = g.vec.CreateVector()
@@ -406,40 +349,21 @@ def analyse(mesh, fields, info, s: Settings):
 
 def run(s: Settings, threads=1, verbose=False):
     """Mesh, solve and analyse one :class:`Settings`; returns a JSON-ready dict."""
-    ng, occ = stokes_fem.require(threads)
-    t0 = time.perf_counter()
-    mesh = build_mesh(s, ng, occ)
-    t_mesh = time.perf_counter() - t0
-    if verbose:
-        print(f"  mesh {mesh.ne} tets, {t_mesh:.1f} s", flush=True)
-    p_drop = 12.0 * 2.0 * s.L * s.ell        # U ~ 1
-    fields, info = solve_pair(mesh, s, ng, p_drop)
-    out = analyse(mesh, fields, info, s)
-    out.update(settings=dataclasses.asdict(s), mesh=s.mesh_label(), domain=s.domain_label(),
-               ndof=info["ndof"], solve=info, t_mesh=t_mesh,
-               wall_s=time.perf_counter() - t0)
-    return out
+    def solve(mesh, ng):
+        p_drop = 12.0 * 2.0 * s.L * s.ell        # U ~ 1
+        fields, info = solve_pair(mesh, s, ng, p_drop)
+        return analyse(mesh, fields, info, s), info
+
+    return stokes_fem.run_sphere(s, threads, verbose, build_mesh, solve,
+                                 labels={"domain": s.domain_label()})
 
 
 # --------------------------------------------------------------------------- table
 
 def cached_run(s: Settings, runs_dir, threads):
     """:func:`run`, or the JSON of an earlier run of the same settings in ``runs_dir``."""
-    path = None
-    if runs_dir is not None:
-        path = pathlib.Path(runs_dir) / f"{s.tag()}.json"
-        if path.exists():
-            rec = json.loads(path.read_text())
-            if rec.get("settings") == dataclasses.asdict(s):
-                return rec
-    print(f"solving {s.tag()}", flush=True)
-    rec = run(s, threads, verbose=True)
-    print(f"  lambda {rec['drift_ratio']:.5f}  B_free/a^2 {rec['dipole_free']:.4f}  "
-          f"ndof {rec['ndof']}  {rec['wall_s']:.0f} s", flush=True)
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(rec, indent=1))
-    return rec
+    return stokes_fem.cached_run(s, runs_dir, lambda s: run(s, threads, verbose=True),
+                                 "lambda {drift_ratio:.5f}  B_free/a^2 {dipole_free:.4f}")
 
 
 QUANTITIES = ("drift_ratio", "dipole_free", "dipole_fixed", "dipole_moving", "f_fix", "f_mov")
@@ -456,33 +380,22 @@ def changes(ref, other):
 
 
 def write_table(rows, path, command, error_line):
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as fh:
-        fh.write(f"# 3D Stokes (NGSolve), sphere at mid-gap, isolated (side-wall images removed); "
-                 f"reproduce: {command}\n")
-        fh.write(f"# {error_line}\n")
-        fh.write("# dipoles over a^2 (p' = -B G x/r^2 fixed, +C 12 eta V/H^2 x/r^2 moving, "
-                 "B_free = B - lambda C); f_fix = F_fix/(eta U a), f_mov = F_mov/(eta V a); "
-                 "mesh h_far/h_part/h_film P_order; domain in ell = max(d, 0.7H)\n")
-        wr = csv.writer(fh, lineterminator="\n")
-        wr.writerow(CSV_COLUMNS)
-        for r in rows:
-            wr.writerow([f"{r['settings']['dh']:g}", f"{r['drift_ratio']:.5f}",
-                         f"{r['dipole_free']:.5f}", f"{r['dipole_fixed']:.5f}",
-                         f"{r['dipole_moving']:.5f}", f"{r['f_fix']:.4f}", f"{r['f_mov']:.4f}",
-                         r["ndof"], r["mesh"], r["domain"]])
+    comments = [f"3D Stokes (NGSolve), sphere at mid-gap, isolated (side-wall images removed); "
+                f"reproduce: {command}",
+                error_line,
+                "dipoles over a^2 (p' = -B G x/r^2 fixed, +C 12 eta V/H^2 x/r^2 moving, "
+                "B_free = B - lambda C); f_fix = F_fix/(eta U a), f_mov = F_mov/(eta V a); "
+                "mesh h_far/h_part/h_film P_order; domain in ell = max(d, 0.7H)"]
+    cells = [[f"{r['settings']['dh']:g}", f"{r['drift_ratio']:.5f}", f"{r['dipole_free']:.5f}",
+              f"{r['dipole_fixed']:.5f}", f"{r['dipole_moving']:.5f}", f"{r['f_fix']:.4f}",
+              f"{r['f_mov']:.4f}", r["ndof"], r["mesh"], r["domain"]] for r in rows]
+    stokes_fem.write_table(path, comments, CSV_COLUMNS, cells)
 
 
 def read_table(path=DATA_CSV):
     """The CSV as a dict ``{d_over_H: row}`` (numbers as floats)."""
-    with open(path) as fh:
-        rows = csv.DictReader(line for line in fh if not line.startswith("#"))
-        out = {}
-        for row in rows:
-            out[float(row["d_over_H"])] = {k: (v if k in ("mesh", "domain") else float(v))
-                                           for k, v in row.items()}
-    return out
+    return {row["d_over_H"]: row
+            for row in stokes_fem.read_table(path, text=("mesh", "domain"))}
 
 
 def table(dhs, csv_path, runs_dir, threads, checks, command):
@@ -515,27 +428,14 @@ def table(dhs, csv_path, runs_dir, threads, checks, command):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--dh", type=float, help="d/H of a single run")
-    ap.add_argument("--quick", action="store_true", help="the coarse 'quick' preset")
-    ap.add_argument("--preset", choices=sorted(PRESETS), help="a named preset (default table)")
-    ap.add_argument("--out", help="JSON of a single run")
-    ap.add_argument("--table", action="store_true", help="solve TABLE_DH and write the CSV")
-    ap.add_argument("--checks", action="store_true", help="with --table: mesh and domain checks")
-    ap.add_argument("--table-dh", help="with --table: comma-separated d/H instead of TABLE_DH")
-    ap.add_argument("--csv", default=str(DATA_CSV), help="with --table (%(default)s)")
-    ap.add_argument("--runs", help="folder for each solve's JSON (reused when settings match)")
+    stokes_fem.add_run_options(ap, PRESETS, DATA_CSV, table="TABLE_DH", axis="dh", label="d/H",
+                               checks="mesh and domain checks")
     ap.add_argument("--W", type=float, help="half-width / ell")
     ap.add_argument("--L", type=float, help="half-length / ell")
     ap.add_argument("--sidewall", choices=("slip", "noslip"))
-    ap.add_argument("--hfar", type=float, help="element size far away / H")
-    ap.add_argument("--hpart", type=float, help="on the sphere / a")
-    ap.add_argument("--hfilm", type=float, help="in the film / local film thickness")
-    ap.add_argument("--order", type=int, help="velocity order k (P_k/P_(k-1))")
-    ap.add_argument("--threads", type=int, default=1, help="NGSolve threads (%(default)s)")
+    stokes_fem.add_mesh_options(ap)
     args = ap.parse_args(argv)
-    try:
-        stokes_fem.require(args.threads)
-    except stokes_fem.MissingExtra as exc:
-        print(f"stokes_sphere_gap: {exc}", file=sys.stderr)
+    if stokes_fem.extra_missing("stokes_sphere_gap", args.threads):
         return 2
     if args.table:
         dhs = ([float(v) for v in args.table_dh.split(",")] if args.table_dh else TABLE_DH)
@@ -559,9 +459,7 @@ def main(argv=None):
     summary = {k: rec[k] for k in QUANTITIES + ("ndof", "mesh", "domain", "wall_s")}
     summary["ring_spread_rel"] = rec["diagnostics"]["ring_spread_rel"]
     summary["F_surface_rel"] = {k: rec["solve"][k]["F_surface_rel"] for k in ("fixed", "moving")}
-    print(json.dumps(summary, indent=1))
-    if args.out:
-        pathlib.Path(args.out).write_text(json.dumps(rec, indent=1))
+    stokes_fem.print_run(rec, summary, args.out)
     return 0
 
 

@@ -131,9 +131,7 @@ takes 17-130 s and up to 4 GB per ``phi``, the most at the smallest ``phi``
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
-import json
 import math
 import pathlib
 import shlex
@@ -156,7 +154,7 @@ G_MEAN = 12.0               # mean gradient of the fixed problem: U_P = G H^2 / 
 
 
 @dataclasses.dataclass(frozen=True)
-class Settings:
+class Settings(stokes_fem.MeshSettings):
     """One solve. Lengths are over ``H``.
 
     Attributes
@@ -201,12 +199,8 @@ class Settings:
         """Lattice period over ``H``."""
         return self.a * math.sqrt(math.pi / self.phi)
 
-    def mesh_label(self):
-        return f"{self.h_far:g}/{self.h_part:g}/{self.h_film:g} P{self.order}"
-
     def tag(self):
-        return (f"{self.xmode}_dh{self.dh:g}_phi{self.phi:g}_"
-                f"h{self.h_far:g}_{self.h_part:g}_{self.h_film:g}_p{self.order}")
+        return f"{self.xmode}_dh{self.dh:g}_phi{self.phi:g}_{self.mesh_tag()}"
 
 
 # Presets (mesh; d/H and phi are given separately). "table" is the CSV's; "quick"
@@ -229,59 +223,20 @@ def preset(name, dh, phi, **overrides):
 
 # --------------------------------------------------------------------------- mesh
 
-def film_points(a, delta, h_film, phimax, rings=8):
-    """Points and sizes that cap the mesh over the lubrication film to the plate.
-
-    Returns
-    -------
-    list of tuple
-        ``(x, y, z, h)``. There are ``rings`` radii ``rho`` up to ``min(0.95 a,
-        sqrt(8 a delta))``, each spread over the arc ``0 <= angle <= phimax`` at
-        mid-film height ``z = h(rho)/2``, with size ``h_film h(rho)``.
-    """
-    rho_max = min(0.95 * a, math.sqrt(8.0 * a * max(delta, 0.0)))
-    out = []
-    for rho in np.linspace(0.0, rho_max, rings):
-        film = delta + a - math.sqrt(max(a * a - rho * rho, 0.0))
-        size = h_film * film
-        n_phi = int(math.ceil(phimax * rho / size)) + 1 if rho > 0 else 1
-        for ang in np.linspace(0.0, phimax, n_phi):
-            out.append((rho * math.cos(ang), max(rho * math.sin(ang), 0.0), 0.5 * film, size))
-    return out
-
-
 def build_mesh(s: Settings, ng, occ):
-    """The computed cell's curved tetrahedral mesh.
+    """The computed cell's curved tetrahedral mesh (refined over the film:
+    ``stokes_fem.film_points``).
 
     Faces: ``xlo`` (x = 0, or -L/2 when periodic), ``xhi`` (x = L/2), ``ylo`` (y = 0),
     ``yhi`` (y = L/2), ``plate`` (z = 0), ``mid`` (z = H/2), ``particle``.
     """
-    from netgen.meshing import MeshingParameters  # present once require() passed
-
-    a, L = s.a, s.L
-    x0 = 0.0 if s.xmode == "sym" else -0.5 * L
-    box = occ.Box(occ.Pnt(x0, 0, 0), occ.Pnt(0.5 * L, 0.5 * L, 0.5))
-    box.faces.Min(occ.X).name = "xlo"
-    box.faces.Max(occ.X).name = "xhi"
-    box.faces.Min(occ.Y).name = "ylo"
-    box.faces.Max(occ.Y).name = "yhi"
-    box.faces.Min(occ.Z).name = "plate"
-    box.faces.Max(occ.Z).name = "mid"
-    sphere = occ.Sphere(occ.Pnt(0, 0, 0.5), a)
-    sphere.faces.name = "particle"
-    sphere.faces.maxh = s.h_part * a
-    fluid = box - sphere
-    if s.xmode == "periodic":
-        fluid.faces.Min(occ.X).Identify(fluid.faces.Max(occ.X), "px",
-                                        occ.IdentificationType.PERIODIC)
-    mp = MeshingParameters(maxh=s.h_far, grading=0.3)
-    phimax = 0.5 * math.pi if s.xmode == "sym" else math.pi
-    for x, y, z, h in film_points(a, 0.5 - a, s.h_film, phimax):
-        mp.RestrictH(x, y, z, h=h)
-    mesh = ng.Mesh(occ.OCCGeometry(fluid).GenerateMesh(mp=mp))
-    if s.order > 1:
-        mesh.Curve(s.order)
-    return mesh
+    L = s.L
+    sym = s.xmode == "sym"
+    return stokes_fem.sphere_box_mesh(s, ng, occ, (0.0 if sym else -0.5 * L, 0, 0),
+                                      (0.5 * L, 0.5 * L, 0.5),
+                                      ("xlo", "xhi", "ylo", "yhi", "plate", "mid"),
+                                      phimax=0.5 * math.pi if sym else math.pi,
+                                      periodic_x=not sym)
 
 
 # -------------------------------------------------------------------------- solve
@@ -334,21 +289,8 @@ def solve_pair(mesh, s: Settings, ng):
         rhs["fixed"] += (G_MEAN * 0.5 * s.L) * vx * n[0] * ng.ds("xhi")
     else:
         rhs["fixed"] += G_MEAN * vx * ng.dx
-    for f in rhs.values():
-        f.Assemble()
     particle = mesh.Boundaries("particle")
-    fields = {}
-    for key in ("fixed", "moving"):
-        g = ng.GridFunction(X)
-        if key == "moving":
-            g.components[0].Set(ng.CF(1.0), definedon=particle)
-        res = rhs[key].vec.CreateVector()
-        res.data = rhs[key].vec - form.mat * g.vec
-        g.vec.data += inv * res
-        fields[key] = g
-
-    w = ng.GridFunction(X)
-    w.components[0].Set(ng.CF(1.0), definedon=particle)
+    fields, w = stokes_fem.solve_fixed_moving(ng, X, form, inv, rhs, particle, ng.CF(1.0))
     # periodic: the solved pressure is the periodic part; the physical p_per - G x
     # pushes the held sphere with G times its volume
     body = 0.0 if sym else G_MEAN * 4.0 / 3.0 * math.pi * s.a ** 3
@@ -424,39 +366,21 @@ def analyse(info, s: Settings):
 
 def run(s: Settings, threads=1, verbose=False):
     """Mesh, solve and analyse one :class:`Settings`; returns a JSON-ready dict."""
-    ng, occ = stokes_fem.require(threads)
-    t0 = time.perf_counter()
-    mesh = build_mesh(s, ng, occ)
-    t_mesh = time.perf_counter() - t0
-    if verbose:
-        print(f"  L = {s.L:.4f} H, mesh {mesh.ne} tets, {t_mesh:.1f} s", flush=True)
-    info = solve_pair(mesh, s, ng)
-    out = analyse(info, s)
-    out.update(settings=dataclasses.asdict(s), mesh=s.mesh_label(), ndof=info["ndof"],
-               solve=info, t_mesh=t_mesh, wall_s=time.perf_counter() - t0)
-    return out
+    def solve(mesh, ng):
+        info = solve_pair(mesh, s, ng)
+        return analyse(info, s), info
+
+    return stokes_fem.run_sphere(s, threads, verbose, build_mesh, solve,
+                                 note=f"L = {s.L:.4f} H, ")
 
 
 # --------------------------------------------------------------------------- table
 
 def cached_run(s: Settings, runs_dir, threads):
     """:func:`run`, or the JSON of an earlier run of the same settings in ``runs_dir``."""
-    path = None
-    if runs_dir is not None:
-        path = pathlib.Path(runs_dir) / f"{s.tag()}.json"
-        if path.exists():
-            rec = json.loads(path.read_text())
-            if rec.get("settings") == dataclasses.asdict(s):
-                return rec
-    print(f"solving {s.tag()}", flush=True)
-    rec = run(s, threads, verbose=True)
-    print(f"  V/U_mean {rec['drift_over_mean']:.6f}  V/U_fluid {rec['drift_over_fluid']:.6f}  "
-          f"U_mean/U_P {rec['mean_over_poiseuille']:.6f}  ndof {rec['ndof']}  "
-          f"{rec['wall_s']:.0f} s", flush=True)
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(rec, indent=1))
-    return rec
+    return stokes_fem.cached_run(s, runs_dir, lambda s: run(s, threads, verbose=True),
+                                 "V/U_mean {drift_over_mean:.6f}  V/U_fluid "
+                                 "{drift_over_fluid:.6f}  U_mean/U_P {mean_over_poiseuille:.6f}")
 
 
 def extrapolate_zero(rows, n=3):
@@ -472,23 +396,15 @@ def extrapolate_zero(rows, n=3):
 
 def write_table(rows, path, header):
     """Write the CSV: one ``#`` line (``header``), the column names, then the rows."""
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as fh:
-        fh.write("# " + header.replace("\n", " ") + "\n")
-        wr = csv.writer(fh, lineterminator="\n")
-        wr.writerow(CSV_COLUMNS)
-        for r in sorted(rows, key=lambda r: r["phi"]):
-            wr.writerow([f"{r['d_over_H']:g}", f"{r['phi']:g}",
-                         "inf" if math.isinf(r["cell_over_H"]) else f"{r['cell_over_H']:.6f}"]
-                        + [f"{r[k]:.6f}" for k in RATIOS])
+    cells = [[f"{r['d_over_H']:g}", f"{r['phi']:g}",
+              "inf" if math.isinf(r["cell_over_H"]) else f"{r['cell_over_H']:.6f}"]
+             + [f"{r[k]:.6f}" for k in RATIOS] for r in sorted(rows, key=lambda r: r["phi"])]
+    stokes_fem.write_table(path, [header.replace("\n", " ")], CSV_COLUMNS, cells)
 
 
 def read_table(path=DATA_CSV):
     """The CSV as a list of rows (dicts of floats), in file order."""
-    with open(path) as fh:
-        return [{k: float(v) for k, v in row.items()}
-                for row in csv.DictReader(line for line in fh if not line.startswith("#"))]
+    return stokes_fem.read_table(path)
 
 
 def table(dh, phis, csv_path, runs_dir, threads, checks, command):
@@ -548,33 +464,19 @@ def round_up(x):
 
 def preset_label(name):
     """Preset ``name``'s mesh as ``h_far/h_part/h_film P_order``."""
-    p = PRESETS[name]
-    return f"{p['h_far']:g}/{p['h_part']:g}/{p['h_film']:g} P{p['order']}"
+    return stokes_fem.mesh_label(**PRESETS[name])
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--dh", type=float, default=0.875, help="d/H (%(default)s)")
     ap.add_argument("--phi", type=float, help="area fraction pi a^2/L^2 of a single run")
-    ap.add_argument("--quick", action="store_true", help="the coarse 'quick' preset")
-    ap.add_argument("--preset", choices=sorted(PRESETS), help="a named preset (default table)")
-    ap.add_argument("--out", help="JSON of a single run")
-    ap.add_argument("--table", action="store_true", help="solve TABLE_PHI and write the CSV")
-    ap.add_argument("--checks", action="store_true", help="with --table: the mesh checks")
-    ap.add_argument("--table-phi", help="with --table: comma-separated phi instead of TABLE_PHI")
-    ap.add_argument("--csv", default=str(DATA_CSV), help="with --table (%(default)s)")
-    ap.add_argument("--runs", help="folder for each solve's JSON (reused when settings match)")
+    stokes_fem.add_run_options(ap, PRESETS, DATA_CSV, table="TABLE_PHI", axis="phi",
+                               label="phi", checks="the mesh checks")
     ap.add_argument("--xmode", choices=("sym", "periodic"), help="1/8 cell (sym) or periodic")
-    ap.add_argument("--hfar", type=float, help="element size far away / H")
-    ap.add_argument("--hpart", type=float, help="on the sphere / a")
-    ap.add_argument("--hfilm", type=float, help="in the film / local film thickness")
-    ap.add_argument("--order", type=int, help="velocity order k (P_k/P_(k-1))")
-    ap.add_argument("--threads", type=int, default=1, help="NGSolve threads (%(default)s)")
+    stokes_fem.add_mesh_options(ap)
     args = ap.parse_args(argv)
-    try:
-        stokes_fem.require(args.threads)
-    except stokes_fem.MissingExtra as exc:
-        print(f"stokes_sphere_lattice: {exc}", file=sys.stderr)
+    if stokes_fem.extra_missing("stokes_sphere_lattice", args.threads):
         return 2
     if args.table:
         if not 0.0 < args.dh < 1.0:
@@ -608,9 +510,7 @@ def main(argv=None):
     summary = {k: rec[k] for k in keys}
     summary["F_surface_rel"] = {k: rec["solve"][k]["F_surface_rel"] for k in ("fixed", "moving")}
     summary["xmode"] = s.xmode
-    print(json.dumps(summary, indent=1))
-    if args.out:
-        pathlib.Path(args.out).write_text(json.dumps(rec, indent=1))
+    stokes_fem.print_run(rec, summary, args.out)
     return 0
 
 
