@@ -179,3 +179,21 @@ def test_neck_study_sets_the_width_from_the_diameter_and_tabulates(tmp_path):
     md = (out / "neck.md").read_text().splitlines()
     assert md[0].startswith("| W/d |") and md[2].startswith("| 1.3 |")
     assert (out / "neck.csv").read_text().splitlines()[1].startswith("1.3,")
+    # where a clog held: the most downstream particle near the neck, in diameters
+    # upstream of its entrance; placed by hand 0.4 d up, one further back, one
+    # beyond the window (5 d up) and one dead
+    import json
+    from taichi_hsdem.resolve.domain import _geometry
+    from taichi_hsdem.scene import load_scene
+    g = _geometry(load_scene(point / "scene.resolved.toml").geometry)
+    d, x0 = 140e-6, g.constriction_x0
+    summary = json.loads((point / "summary.json").read_text())
+    summary["realizations"][0]["clogged"] = True
+    summary["final_state"] = [{"x": [[x0 - 0.4 * d, 0.0], [x0 - 1.5 * d, 0.0],
+                                     [x0 - 5 * d, 0.0], [x0 + 0.2 * d, 0.0]],
+                               "alive": [1, 1, 1, 0]}]
+    (point / "summary.json").write_text(json.dumps(summary))
+    assert neck.arch_positions(point) == [pytest.approx(0.4, rel=1e-9)]
+    summary["realizations"][0]["clogged"] = False     # only clogged realizations count
+    (point / "summary.json").write_text(json.dumps(summary))
+    assert neck.arch_positions(point) == []
