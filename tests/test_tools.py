@@ -197,3 +197,32 @@ def test_neck_study_sets_the_width_from_the_diameter_and_tabulates(tmp_path):
     summary["realizations"][0]["clogged"] = False     # only clogged realizations count
     (point / "summary.json").write_text(json.dumps(summary))
     assert neck.arch_positions(point) == []
+
+
+def test_sweep_changes_compares_points_paired_by_seed(tmp_path):
+    """tools/sweep_changes.py: each point's <s> against the reference, paired by
+    seed. A point whose every realization clogs after 10 more escapes than the
+    reference's moves <s> by +10 exactly (every resample of the pairs too); a copy
+    of the reference does not move it; a missing reference exits 2."""
+    import json
+    tool = _load("sweep_changes")
+
+    def point(name, escapees):
+        (tmp_path / name).mkdir()
+        rows = [{"seed": 100 + k, "escapees": s, "clogged": True, "status": "ok"}
+                for k, s in enumerate(escapees)]
+        mean = sum(escapees) / len(escapees)
+        (tmp_path / name / "summary.json").write_text(json.dumps(
+            {"realizations": rows, "mean_escapees": mean,
+             "mean_escapees_ci": [0.8 * mean, 1.2 * mean]}))
+
+    base = [3, 7, 1, 12, 5, 9, 2, 6, 4, 8]
+    point("base", base)
+    point("more", [s + 10 for s in base])
+    point("same", base)
+    text = tool.table(tmp_path)
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines()[2:]}
+    assert "+10.00 [+10.00, +10.00]" in rows["more"] and rows["more"].endswith("| yes |")
+    assert "+0.00 [+0.00, +0.00]" in rows["same"] and rows["same"].endswith("| no |")
+    assert "(reference)" in rows["base"]
+    assert tool.main([str(tmp_path), "--reference", "nothing"]) == 2

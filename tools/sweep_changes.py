@@ -1,0 +1,84 @@
+"""Which point of a finished sweep moved the clogging statistics: each point's
+mean escapees before a clog ``<s>`` beside its change from a reference point,
+with the paired bootstrap interval (the points share their seeds).
+
+Usage::
+
+    python tools/sweep_changes.py SWEEP_OUT [--reference base] [--out FILE.md]
+
+``SWEEP_OUT`` is a ``python -m taichi_hsdem sweep`` output folder (one folder
+per point, each with its ``summary.json``); ``--reference`` names the folder of
+the point the others are compared with (default ``base``, the point of no
+override). A change "moves `<s>`" when its 95 % interval (BCa, paired by seed,
+4000 resamples: :func:`taichi_hsdem.stats.mean_difference`) leaves out 0.
+Prints a markdown table (and writes it to ``--out``).
+
+Exit status: 0 the table was written; 2 the folder, a point or the reference is
+missing or unreadable (one line each).
+"""
+from __future__ import annotations
+
+import json
+import pathlib
+import sys
+
+from taichi_hsdem.exits import EXIT_INVALID, EXIT_OK, Parser
+
+
+def _counts(folder: pathlib.Path):
+    """``(seeds, escapees, clogged, mean, ci, n_ok)`` of a point's stable realizations."""
+    s = json.loads((folder / "summary.json").read_text())
+    ok = [r for r in s["realizations"] if r["status"] == "ok"]
+    return ([r["seed"] for r in ok], [r["escapees"] for r in ok], [bool(r["clogged"]) for r in ok],
+            s["mean_escapees"], s["mean_escapees_ci"], len(s["realizations"]))
+
+
+def table(out: pathlib.Path, reference: str = "base") -> str:
+    """The markdown table of every point of ``out`` against ``reference``."""
+    from taichi_hsdem.stats import mean_difference
+    from taichi_hsdem.studies import fmt
+    ref = _counts(out / reference)
+    rows = ["| point | `<s>` [95 %] | clogged | change from the reference [95 %, paired] | moves `<s>` |",
+            "|---|---|---|---|---|"]
+    for folder in sorted(p for p in out.iterdir() if (p / "summary.json").exists()):
+        seeds, esc, clog, mean, (lo, hi), n = _counts(folder)
+        line = (f"| {folder.name} | {fmt(mean)} [{fmt(lo)}, {fmt(hi)}] | {sum(clog)} of {n} |")
+        if folder.name == reference:
+            rows.append(line + " (reference) | |")
+            continue
+        paired = seeds == ref[0]
+        diff, (dlo, dhi) = mean_difference(ref[1], ref[2], esc, clog, method="bca",
+                                           paired=paired)
+        moves = "yes" if (dlo > 0 or dhi < 0) else "no"
+        rows.append(line + f" {diff:+.2f} [{dlo:+.2f}, {dhi:+.2f}]"
+                    + ("" if paired else " (unpaired)") + f" | {moves} |")
+    return "\n".join(rows) + "\n"
+
+
+def main(argv=None) -> int:
+    p = Parser(prog="tools/sweep_changes.py", description=__doc__.split("\n\n")[0])
+    p.add_argument("folder", help="a sweep's output folder")
+    p.add_argument("--reference", default="base", help="the reference point's folder name")
+    p.add_argument("--out", help="also write the table to this file")
+    try:
+        args = p.parse_args(argv)
+    except SystemExit as exc:          # --help (0) or a bad argument (2)
+        return exc.code
+    out = pathlib.Path(args.folder)
+    if not (out / args.reference / "summary.json").exists():
+        print(f"{out}: no finished reference point {args.reference!r} (its summary.json)",
+              file=sys.stderr)
+        return EXIT_INVALID
+    try:
+        text = table(out, args.reference)
+    except (OSError, ValueError, KeyError) as exc:
+        print(f"{out}: a point's summary.json cannot be read: {exc}", file=sys.stderr)
+        return EXIT_INVALID
+    print(text, end="")
+    if args.out:
+        pathlib.Path(args.out).write_text(text)
+    return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())
