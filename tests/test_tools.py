@@ -203,7 +203,9 @@ def test_sweep_changes_compares_points_paired_by_seed(tmp_path):
     """tools/sweep_changes.py: each point's <s> against the reference, paired by
     seed. A point whose every realization clogs after 10 more escapes than the
     reference's moves <s> by +10 exactly (every resample of the pairs too); a copy
-    of the reference does not move it; a missing reference exits 2."""
+    of the reference does not move it; a noisy shift of +2.9 leaves out 0 at 95 %
+    but not at the Bonferroni level of three comparisons (1 - 0.05/3), whose
+    interval is the wider; a missing reference exits 2."""
     import json
     tool = _load("sweep_changes")
 
@@ -220,9 +222,12 @@ def test_sweep_changes_compares_points_paired_by_seed(tmp_path):
     point("base", base)
     point("more", [s + 10 for s in base])
     point("same", base)
+    point("noisy", [8, 3, 2, 15, 5, 15, 8, 11, 5, 13])
     text = tool.table(tmp_path)
     rows = {line.split("|")[1].strip(): line for line in text.splitlines()[2:]}
-    assert "+10.00 [+10.00, +10.00]" in rows["more"] and rows["more"].endswith("| yes |")
-    assert "+0.00 [+0.00, +0.00]" in rows["same"] and rows["same"].endswith("| no |")
+    assert "+10.00 [+10.00, +10.00]" in rows["more"] and rows["more"].endswith("| yes | yes |")
+    assert "+0.00 [+0.00, +0.00]" in rows["same"] and rows["same"].endswith("| no | no |")
+    assert rows["noisy"].endswith("| yes | no |")
+    assert "beyond chance over all 3 (Bonferroni)" in text.splitlines()[0]
     assert "(reference)" in rows["base"]
     assert tool.main([str(tmp_path), "--reference", "nothing"]) == 2
