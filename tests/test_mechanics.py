@@ -266,3 +266,48 @@ def test_normalisation_makes_contact_stiffness_independent_of_node_count():
         assert face_overlap(nodes, True, load) == pytest.approx(load / kn, rel=0.02)
         on_face = nodes // 4 + 1
         assert face_overlap(nodes, False, load) == pytest.approx(load / (kn * on_face), rel=0.05)
+
+
+# An arch's force balance: two frictionless disks (d = 1) wedged side by side in a
+# closed 45-degree funnel that narrows to 1.2, each pushed downstream by a
+# constant load F. Statics alone fixes the contact forces: the wall's push is
+# along its normal (-1, -1)/sqrt(2) on the upper disk, the other disk's along
+# +y, so F - N/sqrt(2) = 0 and P - N/sqrt(2) = 0: N = sqrt(2) F, P = F, with no
+# friction needed (the wall's normal has a component against the load). The disks'
+# analytic contact is linear, F_n = k_n delta with delta = r_i + r_j - |x_i - x_j|
+# against a disk and r - (distance to the wall) against a wall (the wall's level set
+# is exact for a straight side: a linear function interpolates exactly), so
+# at rest the pair overlaps by F / k_n and each wall by sqrt(2) F / k_n.
+FUNNEL = [[0.0, 0.0], [5.6, 0.0], [10.0, 4.4], [10.0, 5.6], [5.6, 10.0], [0.0, 10.0]]
+
+
+def test_frictionless_pair_wedged_in_a_45_degree_funnel_holds_as_statics_says():
+    kn, load = 1.0e4, 2.0
+    scene = arena_scene([{"shape": "circle", "diameter": 1.0, "count": 2}], kn=kn,
+                        friction=0.0, restitution=0.5, xi=5.0, dt_safety=0.1)
+    scene["geometry"].update(outline=FUNNEL, obstacles=[], constriction_x=9.9,
+                             escape_offset=0.05)
+    scene["feed"]["region"] = [1.0, 9.0]
+    sim = make_sim(scene)
+    # started 0.05 apart and 0.1 upstream of where they wedge, at rest
+    x_wedge = 10.0 - (0.5 * math.sqrt(2) + 0.5 - 0.6)
+    sim.set_state([[[x_wedge - 0.1, 4.45], [x_wedge - 0.1, 5.55]]])
+    sim.set_external_load(force=[[[load, 0.0], [load, 0.0]]])
+    sim.advance(int(4.0 / sim.dt))
+    f, _ = (a[0] for a in sim.forces())
+    st = sim.state()
+    assert sim.batch.bad.to_numpy()[0] == 0 and st["alive"].all()
+    lower, upper = st["x"][0]
+    # at rest, the contacts balancing the load (forces() leaves the load out; the
+    # residual decays like exp(-xi t) = exp(-20), measured 1e-12 of the load)
+    np.testing.assert_allclose(f, [[-load, 0.0], [-load, 0.0]], rtol=0, atol=1e-6 * load)
+    assert np.abs(st["v"]).max() < 1e-9
+    # symmetric about the centre line, side by side
+    assert upper[0] == pytest.approx(lower[0], abs=1e-9)
+    assert upper[1] + lower[1] == pytest.approx(10.0, abs=1e-9)
+    pair = 1.0 - float(np.linalg.norm(upper - lower))
+    wall = 0.5 - (15.6 - upper[0] - upper[1]) / math.sqrt(2)   # upper side x + y = 15.6
+    assert pair * kn == pytest.approx(load, rel=1e-6)
+    assert wall * kn == pytest.approx(math.sqrt(2) * load, rel=1e-6)
+    # where statics puts them: the pair's wedge point, moved in by the overlaps
+    assert upper[1] - 5.0 == pytest.approx(0.5 - pair / 2, rel=1e-9)
