@@ -398,12 +398,14 @@ class TaichiPressureSolver:
                              "implicit one), not both")
         k_dev, single = self._device_grid(kappa, "kappa", self._kappa_in)
         _scan(k_dev, self._seen, self._connected_dev, self._flags)
-        if not self._had_zeros.any():
-            # No realization had cut-off cells: solve before reading the scan (one
-            # read per solve, the report at its end), the operators built anew
-            # (the same kappa builds the same operator, bit for bit). Should the
-            # scan have found zero or invalid permeabilities, the kept guess is put
-            # back and the solve done again the careful way below.
+        if self.parallel == "cells" and not self._had_zeros.any():
+            # On a GPU (the cells way), with no realization cut off: solve before
+            # reading the scan (one read per solve, the report at its end), the
+            # operators built anew (the same kappa builds the same operator, bit
+            # for bit). Should the scan have found zero or invalid permeabilities,
+            # the kept guess is put back and the solve done again the careful way
+            # below. On the CPU a read costs less than a rebuild: the scan is read
+            # first and the operators built only where kappa changed.
             _copy_row(self._cg, _SOL, _KEEP)
             self._build(k_dev, None, None)
             report = self._solve_system(x0, carried, occupied, bodies, k_dev)
