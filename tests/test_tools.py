@@ -205,29 +205,45 @@ def test_sweep_changes_compares_points_paired_by_seed(tmp_path):
     reference's moves <s> by +10 exactly (every resample of the pairs too); a copy
     of the reference does not move it; a noisy shift of +2.9 leaves out 0 at 95 %
     but not at the Bonferroni level of three comparisons (1 - 0.05/3), whose
-    interval is the wider; a missing reference exits 2."""
+    interval is the wider; a point with no stable realization says so; a missing
+    reference exits 2."""
     import json
     tool = _load("sweep_changes")
 
-    def point(name, escapees):
+    def point(name, escapees, status="ok"):
         (tmp_path / name).mkdir()
-        rows = [{"seed": 100 + k, "escapees": s, "clogged": True, "status": "ok"}
+        rows = [{"seed": 100 + k, "escapees": s, "clogged": True, "status": status}
                 for k, s in enumerate(escapees)]
-        mean = sum(escapees) / len(escapees)
+        mean = sum(escapees) / len(escapees) if status == "ok" else None
         (tmp_path / name / "summary.json").write_text(json.dumps(
             {"realizations": rows, "mean_escapees": mean,
-             "mean_escapees_ci": [0.8 * mean, 1.2 * mean]}))
+             "mean_escapees_ci": None if mean is None else [0.8 * mean, 1.2 * mean]}))
 
     base = [3, 7, 1, 12, 5, 9, 2, 6, 4, 8]
     point("base", base)
     point("more", [s + 10 for s in base])
     point("same", base)
     point("noisy", [8, 3, 2, 15, 5, 15, 8, 11, 5, 13])
+    point("unstable", [None] * 10, status="unstable")     # every realization went bad
     text = tool.table(tmp_path)
     rows = {line.split("|")[1].strip(): line for line in text.splitlines()[2:]}
     assert "+10.00 [+10.00, +10.00]" in rows["more"] and rows["more"].endswith("| yes | yes |")
     assert "+0.00 [+0.00, +0.00]" in rows["same"] and rows["same"].endswith("| no | no |")
     assert rows["noisy"].endswith("| yes | no |")
+    assert "- [-, -] | 0 of 10 | no stable realization to compare | - | - |" in rows["unstable"]
     assert "beyond chance over all 3 (Bonferroni)" in text.splitlines()[0]
     assert "(reference)" in rows["base"]
     assert tool.main([str(tmp_path), "--reference", "nothing"]) == 2
+
+
+def test_throat_study_reports_an_ensemble_that_never_clogged():
+    """tools/throat_study.py's table cells: an ensemble with no clog has no <s>
+    (stats.summarize gives None): "-", not a traceback; one with clogs gives its
+    estimate and 1/<s>."""
+    from taichi_hsdem import stats
+    tool = _load("throat_study")
+    none = stats.summarize([5, 7, 9], [False, False, False])
+    assert none["mean_escapees"] is None
+    assert tool._estimate(none).startswith("- [") and tool._rate(none) == "-"
+    some = stats.summarize([4, 4, 4, 4], [True] * 4)      # sum(s) / n_clogged = 4
+    assert tool._estimate(some).startswith("4 [") and tool._rate(some) == "0.25"

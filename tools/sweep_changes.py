@@ -29,11 +29,13 @@ from taichi_hsdem.exits import EXIT_INVALID, EXIT_OK, Parser
 
 
 def _counts(folder: pathlib.Path):
-    """``(seeds, escapees, clogged, mean, ci, n_ok)`` of a point's stable realizations."""
+    """``(seeds, escapees, clogged, mean, ci, n)`` of a point: the seeds, escapees and
+    clogs of its stable realizations, its ``<s>`` and interval (None where it has
+    none) and how many realizations it ran."""
     s = json.loads((folder / "summary.json").read_text())
     ok = [r for r in s["realizations"] if r["status"] == "ok"]
     return ([r["seed"] for r in ok], [r["escapees"] for r in ok], [bool(r["clogged"]) for r in ok],
-            s["mean_escapees"], s["mean_escapees_ci"], len(s["realizations"]))
+            s["mean_escapees"], s["mean_escapees_ci"] or (None, None), len(s["realizations"]))
 
 
 def _moves(lo: float, hi: float) -> str:
@@ -45,17 +47,22 @@ def table(out: pathlib.Path, reference: str = "base") -> str:
     from taichi_hsdem.stats import mean_difference
     from taichi_hsdem.studies import fmt
     ref = _counts(out / reference)
-    folders = sorted(p for p in out.iterdir() if (p / "summary.json").exists())
-    k = max(1, sum(f.name != reference for f in folders))
+    points = {f.name: _counts(f) for f in sorted(out.iterdir())
+              if (f / "summary.json").exists()}
+    # the points compared: every other one with a stable realization, if the reference has
+    k = max(1, sum(name != reference and bool(c[0]) for name, c in points.items())
+            if ref[0] else 1)
     family = 1.0 - 0.05 / k
     rows = ["| point | `<s>` [95 %] | clogged | change from the reference [95 %, paired] "
             f"| moves `<s>` | beyond chance over all {k} (Bonferroni) |",
             "|---|---|---|---|---|---|"]
-    for folder in folders:
-        seeds, esc, clog, mean, (lo, hi), n = _counts(folder)
-        line = (f"| {folder.name} | {fmt(mean)} [{fmt(lo)}, {fmt(hi)}] | {sum(clog)} of {n} |")
-        if folder.name == reference:
+    for name, (seeds, esc, clog, mean, (lo, hi), n) in points.items():
+        line = (f"| {name} | {fmt(mean)} [{fmt(lo)}, {fmt(hi)}] | {sum(clog)} of {n} |")
+        if name == reference:
             rows.append(line + " (reference) | | |")
+            continue
+        if not seeds or not ref[0]:
+            rows.append(line + " no stable realization to compare | - | - |")
             continue
         paired = seeds == ref[0]
         diff, (dlo, dhi) = mean_difference(ref[1], ref[2], esc, clog, method="bca",

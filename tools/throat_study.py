@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 import pathlib
 import sys
 
@@ -131,6 +130,21 @@ def _summary(folder: pathlib.Path) -> dict:
     return json.loads((folder / "summary.json").read_text())
 
 
+def _estimate(x) -> str:
+    """``<s> [lo, hi]`` of a :func:`taichi_hsdem.stats.summarize` result; ``-``
+    where it has none (nothing clogged)."""
+    from taichi_hsdem.studies import fmt
+    lo, hi = x["mean_escapees_ci"] or (None, None)
+    return f"{fmt(x['mean_escapees'])} [{fmt(lo)}, {fmt(hi)}]"
+
+
+def _rate(x) -> str:
+    """The per-passage clogging probability ``1 / <s>``; ``-`` without an estimate."""
+    from taichi_hsdem.studies import fmt
+    m = x["mean_escapees"]
+    return "-" if m is None else fmt(1 / m)
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.realizations < 1 or args.t_end <= 0:
@@ -154,8 +168,9 @@ def main(argv=None) -> int:
                   file=sys.stderr)
             return EXIT_FAILED
     one = _summary(out / "single")
-    s1 = [r["escapees"] for r in one["realizations"]]
-    c1 = [bool(r["clogged"]) for r in one["realizations"]]
+    stable = [r for r in one["realizations"] if r["status"] == "ok"]
+    s1 = [r["escapees"] for r in stable]
+    c1 = [bool(r["clogged"]) for r in stable]
     with open(out / "array" / "throats.csv") as fh:
         rows = list(csv.DictReader(fh))
     s2 = [int(r["passages"]) for r in rows]
@@ -169,9 +184,6 @@ def main(argv=None) -> int:
     f = stats.summarize(s3, c3)
     diff3, ci3 = stats.mean_difference(s1, c1, s3, c3)
 
-    def est(x):
-        lo, hi = x["mean_escapees_ci"] or (math.nan, math.nan)
-        return f"{x['mean_escapees']:.3g} [{lo:.3g}, {hi:.3g}]"
     lines = [
         "# Two far-apart throats against a single one of the same shape",
         "",
@@ -180,17 +192,17 @@ def main(argv=None) -> int:
         "",
         "| | ensemble | clogged | mean passages before a clog `<s>` [95 %] |",
         "|---|---|---|---|",
-        f"| single throat | {len(s1)} realizations | {sum(c1)} | {est(a)} |",
+        f"| single throat | {len(s1)} realizations | {sum(c1)} | {_estimate(a)} |",
         f"| array, per throat, whole run | {len(s2)} throats of {len(s2) // 2} realizations | "
-        f"{sum(c2)} | {est(b)} |",
+        f"{sum(c2)} | {_estimate(b)} |",
         f"| array, escapees before the first clog | {len(s3)} realizations | {sum(c3)} | "
-        f"{est(f)} |",
+        f"{_estimate(f)} |",
         "",
         f"Differences from the single throat (MOVER, 95 %): per throat {diff:+.3g} "
         f"[{ci[0]:+.3g}, {ci[1]:+.3g}], before the first clog {diff3:+.3g} "
         f"[{ci3[0]:+.3g}, {ci3[1]:+.3g}]; per-passage clogging probability 1/<s>: "
-        f"{1 / a['mean_escapees']:.3g} single, {1 / b['mean_escapees']:.3g} per array "
-        f"throat, {1 / f['mean_escapees']:.3g} before the array's first clog.",
+        f"{_rate(a)} single, {_rate(b)} per array throat, {_rate(f)} before the array's "
+        f"first clog.",
         f"Array realizations cut off (both throats clogged): "
         f"{sum(1 for r in _summary(out / 'array')['realizations'] if r['clogged'])} of "
         f"{len(s2) // 2}.",
