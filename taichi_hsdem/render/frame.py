@@ -25,6 +25,7 @@ import numpy as np
 import taichi as ti
 from taichi.lang import impl
 
+from ..dem.kmath import sin_cos
 from ..geometry.polygon import signed_area, triangle_areas, triangulate
 from ..geometry.shapes import outline_polygon
 from .font import GLYPH_H, even, format_time, stamp, text_mask
@@ -248,9 +249,7 @@ def _place_particles(x: ti.types.ndarray(dtype=ti.f64, ndim=2),
         o = first[i]
         if o >= 0:
             t = template[i]
-            # in f32 (pixels): SPIR-V (Vulkan) has no f64 trigonometry
-            c = ti.cast(ti.cos(ti.cast(theta[i], ti.f32)), ti.f64)
-            s = ti.cast(ti.sin(ti.cast(theta[i], ti.f32)), ti.f64)
+            c, s = sin_cos(theta[i])   # the kernels' own (SPIR-V has no f64 sin, cos)
             for k in range(block_start[t], block_start[t + 1]):
                 qx = local[k, 0]
                 qy = local[k, 1]
