@@ -218,6 +218,17 @@ def ls_force(bodies: ti.template(), batch: ti.template(), particles: ti.template
 
 
 @ti.func
+def _body_pose(bodies: ti.template(), particles: ti.template(), templates: ti.template(), r, i):
+    """Body ``i`` of realization ``r`` as the node loops read it: its template,
+    position, (cos, sin) of its angle, velocity, spin, and its nodes' offset and
+    count in the stacked node table."""
+    t = particles.species[i]
+    c, s = sin_cos(bodies.theta[r, i])
+    return (t, bodies.x[r, i], c, s, bodies.v[r, i], bodies.omega[r, i],
+            templates.node_meta[t, 0], templates.node_meta[t, 1])
+
+
+@ti.func
 def ls_pairs(bodies: ti.template(), batch: ti.template(), particles: ti.template(),
              materials: ti.template(), templates: ti.template(), history: ti.template(),
              neighbors: ti.template(), flags: ti.template(), slots: ti.template(), dt,
@@ -238,13 +249,7 @@ def ls_pairs(bodies: ti.template(), batch: ti.template(), particles: ti.template
     inside the other), and so is a node outside the other body's bounding circle.
     """
     n_part = bodies.x.shape[1]
-    ti_ = particles.species[i]
-    xi = bodies.x[r, i]
-    ci, si = sin_cos(bodies.theta[r, i])
-    vi = bodies.v[r, i]
-    wi = bodies.omega[r, i]
-    noff_i = templates.node_meta[ti_, 0]
-    nn_i = templates.node_meta[ti_, 1]
+    ti_, xi, ci, si, vi, wi, noff_i, nn_i = _body_pose(bodies, particles, templates, r, i)
     pole_i = node_world(templates.inside, ti_, xi, ci, si)
     rb_i = particles.bounding_radius[i]
     for k in range(nn_i):
@@ -350,13 +355,7 @@ def ls_walls(bodies: ti.template(), particles: ti.template(), materials: ti.temp
     static wall level set; the deepest overlap so far comes in (``deepest_pairs``)
     and goes out updated."""
     n_part = bodies.x.shape[1]
-    ti_ = particles.species[i]
-    xi = bodies.x[r, i]
-    ci, si = sin_cos(bodies.theta[r, i])
-    vi = bodies.v[r, i]
-    wi = bodies.omega[r, i]
-    noff_i = templates.node_meta[ti_, 0]
-    nn_i = templates.node_meta[ti_, 1]
+    ti_, xi, ci, si, vi, wi, noff_i, nn_i = _body_pose(bodies, particles, templates, r, i)
     deepest = deepest_pairs
     dropped = 0
     a = particles.species[i]
