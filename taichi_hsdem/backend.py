@@ -191,6 +191,12 @@ def auto_reason() -> str | None:
     return _STATE.get("why")
 
 
+def on_gpu() -> bool:
+    """Whether Taichi runs on a GPU backend now (any but its CPU backends), however
+    it was initialised."""
+    return ti.lang.impl.current_cfg().arch not in (ti.x64, ti.arm64)
+
+
 def current_arch() -> str | None:
     """The backend :func:`init` chose, or None before it."""
     return _STATE.get("arch")

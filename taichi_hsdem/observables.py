@@ -303,7 +303,7 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
              "alive": st["alive"][r].tolist(), "species": st["species"].tolist()}
             for r in range(len(rs.results))],
     }
-    if len(throats) >= 2:
+    if throats.network:
         summary["network"] = network_summary(rs, throats, real, escaped, st)
     return Result(scene=sc, summary=summary, series=series, flow=list(rs.flow),
                   throats=throat_rows(throats, rs.throat_passages, rs.throat_t_clog),

@@ -410,7 +410,7 @@ class Pictures:
         summary.update(self.notes)
         summary["plots"] = report.plot_run(result, self.staged.tmp,
                                            law=report.steady_stream_law(self.sim))
-        if len(self.sim.throats) >= 2:
+        if self.sim.throats.network:
             summary["plots"].update(self._network(result))
 
     def _network(self, result) -> dict:

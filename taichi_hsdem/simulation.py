@@ -388,7 +388,7 @@ class Simulation:
             if res.clogged or final:
                 continue            # stop_at_clog = false: the stream goes on, the result is kept
             if observables.count_escapes(rs, m, r, escaped, dead, st,
-                                         self.throats if len(self.throats) >= 2 else None):
+                                         self.throats if self.throats.network else None):
                 running[r] = 0      # clogged, and run.stop_at_clog
                 changed = True
         if changed:
@@ -398,7 +398,7 @@ class Simulation:
                 self._feed(running, st)
             rs.unfed_by_species = self._dead_by_species(st["alive"])
             rs.check_x, rs.check_alive = st["x"], st["alive"]
-            if len(self.throats) >= 2:
+            if self.throats.network:
                 stable = np.array([res.status == "ok" for res in rs.results])
                 observables.network_rows(rs, checked & stable, escaped, st["alive"])
         return bool(running.any())

@@ -38,7 +38,7 @@ Disks (every particle a circle) take the analytic path: one contact point per
 pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
 """
 
-from ..backend import ti  # sets the environment before Taichi loads
+from ..backend import on_gpu, ti  # sets the environment before Taichi loads
 from .kmath import cross, node_world, rot, rot_t, sin_cos, spin, template_sample, wall_sample
 from ..layout import BAD_PASSED, F_HISTORY_OVERFLOW, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
 from .neighbors import NEIGHBORS
@@ -500,7 +500,7 @@ def add_forces(bodies, batch, particles, materials, templates, walls, history, n
     if disks:
         disk_contacts(*packs, walls.pack(), history.pack(), neighbors.pack(), flags,
                       history.slots, dt)
-    elif not (SPLIT_LS_CONTACTS or ti.lang.impl.current_cfg().arch not in (ti.x64, ti.arm64)):
+    elif not (SPLIT_LS_CONTACTS or on_gpu()):
         ls_contacts(*packs, templates.pack(), walls.pack(), history.pack(), neighbors.pack(),
                     flags, history.slots, dt, int(normalize))
     else:   # a GPU: two kernels of at most 31 arrays each, the same bits

@@ -260,7 +260,7 @@ class TaichiPressureSolver:
         ``realizations`` for grids of at most REALIZATION_CELLS cells, else
         ``rows``. The choice depends on neither the batch size nor the thread
         count, so that a realization gets the same work alone and in a batch."""
-        if ti.lang.impl.current_cfg().arch not in (ti.x64, ti.arm64):
+        if backend.on_gpu():
             return "cells"
         return "realizations" if self.shape[0] * self.shape[1] <= REALIZATION_CELLS else "rows"
 

@@ -80,6 +80,13 @@ class Throats:
     def __len__(self) -> int:
         return len(self.start)
 
+    @property
+    def network(self) -> bool:
+        """Whether these throats make a network (two or more): the whole-run clog
+        is then the inlet cut off from the outlet, and the network outputs are
+        written; one throat is the single-constriction scene."""
+        return len(self.start) >= 2
+
     @cached_property
     def _tree(self):
         from scipy.spatial import cKDTree

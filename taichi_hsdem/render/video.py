@@ -206,7 +206,7 @@ class VideoRecorder:
             esc = int(sim.escaped()[r])
             frame = self.renderer.draw(st["x"][r], st["theta"][r], st["species"],
                                        st["alive"][r], pressure=pres, t=sim.t, escapees=esc)
-            if len(sim.throats) >= 2:
+            if sim.throats.network:
                 self._draw_network(sim, frame)
             if self.writer is not None:
                 self.writer.write(frame)
