@@ -176,12 +176,14 @@ def network_rows(rs: RunState, checked, escaped, alive) -> None:
     the escapes so far (``escaped`` (R,)), as every escaped body died once."""
     n_clogged = np.isfinite(rs.throat_t_clog).sum(axis=1)
     injected = np.asarray(escaped, dtype=np.int64) + np.asarray(alive).sum(axis=1)
+    wanted = {int(r) for r in np.flatnonzero(checked)}
     last = {}
-    for row in reversed(rs.network):
-        if len(last) == len(rs.results):
+    for row in reversed(rs.network):      # the newest row of each realization checked
+        if wanted <= last.keys():
             break
-        last.setdefault(row[0], row)
-    for r in np.flatnonzero(checked):
+        if row[0] in wanted:
+            last.setdefault(row[0], row)
+    for r in sorted(wanted):
         now = (int(injected[r]), int(n_clogged[r]))
         if r not in last or (last[r][2], last[r][3]) != now:
             rs.network.append((int(r), rs.t, *now))
