@@ -22,6 +22,15 @@ SWEEPS = 2
 # 35-72 iterations, 1.5 took 19-35, 1.8 took 14-27, 2.0 took 13-25, 2.3 took 13-31.
 OVERCORRECTION = 2.0
 
+# Half-sweeps of the pre- (and of the post-) smoother.
+_HALVES = 2 * SWEEPS
+
+# Grid columns per block of the ``rows`` way's smoother (_smooth_blocks): a block
+# is smoothed by one thread in one pass, holding about _HALVES + 2 columns in its
+# cache (on the 721-cell columns of a 1590 x 720 grid about 140 kB); the seams
+# between blocks cost about _HALVES^2 / (_HALVES _BLOCK) of that again.
+_BLOCK = 64
+
 # Cells per realization at or below which a level is not coarsened further but
 # factored (dense Cholesky: COARSEST_CELLS^3 / 3 flops per realization per set-up).
 COARSEST_CELLS = 64
@@ -574,30 +583,91 @@ def _sweep(h, post):
     return ti.Vector([colour, reads])
 
 
+@ti.func
+def _sweeps_pass(op: ti.template(), mg: ti.template(), geo: ti.template(), l, r, a0, a1,
+                 west, east, post, alpha):
+    """The smoother's 2 SWEEPS half-sweeps (_sweep) of columns a0..a1-1 of level l
+    in one pass over them: half-sweep h runs h columns behind the first, so a
+    column is read from memory once, not once per half-sweep.
+
+    Every cell gets the operands it gets from whole half-sweeps one after the
+    other (the same bits): half-sweep h at column i needs h - 1 done at columns
+    i - 1..i + 1, which the lag of one column per half-sweep gives, and h + 1
+    overwrites what h read only after h has passed it. A block of columns beside
+    another (``west`` or ``east`` false) leaves half-sweep h undone on its h
+    columns next to that edge, which read or are read across it;
+    _sweeps_seam does them once both blocks are done.
+    """
+    ny = geo[l, _NY]
+    for c in range(a0, a1 + _HALVES - 1):
+        for h in ti.static(range(_HALVES)):
+            i = c - h
+            lo = a0 if west else a0 + h
+            hi = a1 if east else a1 - h
+            if i >= lo and i < hi:
+                colour, reads = _sweep(h, post)
+                _relax_row(op, mg, geo, l, r, i, 0, ny, colour, reads, alpha)
+
+
+@ti.func
+def _sweeps_seam(op: ti.template(), mg: ti.template(), geo: ti.template(), l, r, b, post,
+                 alpha):
+    """What _sweeps_pass left undone at the edge between two blocks of columns at
+    column b: half-sweep h at columns b - h..b + h - 1, in the order of h (blocks
+    of at least 2 _HALVES columns, so that seams do not meet)."""
+    ny = geo[l, _NY]
+    for h in ti.static(range(1, _HALVES)):
+        colour, reads = _sweep(h, post)
+        for i in range(b - h, b + h):
+            _relax_row(op, mg, geo, l, r, i, 0, ny, colour, reads, alpha)
+
+
+@ti.func
+def _blocks(nx):
+    """How many blocks of columns a level of nx columns is smoothed in (the last
+    takes the remainder: every block has at least _BLOCK columns)."""
+    return ti.max(1, nx // _BLOCK)
+
+
+@ti.kernel
+def _smooth_blocks(op: _Ops, mg: _Rows, geo: _Ints, flags: _Ints, l: ti.i32, post: ti.i32):
+    """The pre-smoother (or ``post``: the post-smoother) of level l, in parallel
+    over blocks of _BLOCK grid columns, each in one pass (_sweeps_pass), then
+    over the seams between them; a thread per block (_TASK iterations each, so
+    that the blocks spread over the threads)."""
+    alpha = OVERCORRECTION
+    R, nx = flags.shape[0], geo[l, _NX]
+    blocks = _blocks(nx)
+    for t in range(R * blocks * _TASK):
+        r, b = t // (blocks * _TASK), t // _TASK % blocks
+        if t % _TASK == 0 and flags[r, _RUNNING]:
+            a1 = nx if b == blocks - 1 else (b + 1) * _BLOCK
+            _sweeps_pass(op, mg, geo, l, r, b * _BLOCK, a1, b == 0, b == blocks - 1,
+                         post, alpha)
+    for t in range(R * (blocks - 1) * _TASK):
+        r, b = t // ((blocks - 1) * _TASK), t // _TASK % (blocks - 1)
+        if t % _TASK == 0 and flags[r, _RUNNING]:
+            _sweeps_seam(op, mg, geo, l, r, (b + 1) * _BLOCK, post, alpha)
+
+
 @ti.kernel
 def _smooth(op: _Ops, mg: _Rows, geo: _Ints, flags: _Ints, l: ti.i32, h: ti.i32,
-            post: ti.i32, cells: ti.template()):
-    """Half-sweep h (see _sweep) of level l, in parallel over column segments (or
-    cells); the coarse correction (post-smoothing) scaled by OVERCORRECTION."""
+            post: ti.i32):
+    """Half-sweep h (see _sweep) of level l, in parallel over its cells (the
+    ``cells`` way: on the CPU, _smooth_blocks does all the half-sweeps in one
+    kernel); the coarse correction (post-smoothing) scaled by OVERCORRECTION."""
     alpha = OVERCORRECTION
     R, nx, ny = flags.shape[0], geo[l, _NX], geo[l, _NY]
     colour, reads = _sweep(h, post)
-    if ti.static(cells):
-        half = (ny + 1) // 2  # cells of one colour per column, at most
-        span = _lanes(nx * half)
-        for t in range(R * span):
-            r, c = t // span, t % span
-            if c < nx * half and flags[r, _RUNNING]:
-                i = c // half
-                j = (i + colour) % 2 + 2 * (c % half)
-                if j < ny:
-                    _relax_cell(op, mg, geo, l, r, i, j, reads, alpha)
-    else:
-        segments = _segments(ny)
-        for t in range(R * nx * segments):
-            r, i, j0, j1 = _segment(t, nx, ny, segments)
-            if flags[r, _RUNNING]:
-                _relax_row(op, mg, geo, l, r, i, j0, j1, colour, reads, alpha)
+    half = (ny + 1) // 2  # cells of one colour per column, at most
+    span = _lanes(nx * half)
+    for t in range(R * span):
+        r, c = t // span, t % span
+        if c < nx * half and flags[r, _RUNNING]:
+            i = c // half
+            j = (i + colour) % 2 + 2 * (c % half)
+            if j < ny:
+                _relax_cell(op, mg, geo, l, r, i, j, reads, alpha)
 
 
 @ti.kernel
@@ -633,10 +703,7 @@ def _cycle_of(op: ti.template(), mg: ti.template(), chol: ti.template(), geo: ti
         else:
             post = 1 if stage > down else 0
             l = l0 + stage if not post else L - 1 - (stage - down)
-            for h in range(2 * SWEEPS):
-                colour, reads = _sweep(h, post)
-                for i in range(geo[l, _NX]):
-                    _relax_row(op, mg, geo, l, r, i, 0, geo[l, _NY], colour, reads, alpha)
+            _sweeps_pass(op, mg, geo, l, r, 0, geo[l, _NX], True, True, post, alpha)
             if not post:
                 for I in range(geo[l + 1, _NX]):
                     _restrict_row(op, mg, geo, l, r, I, 0, geo[l + 1, _NY])

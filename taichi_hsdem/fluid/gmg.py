@@ -68,7 +68,11 @@ no branches and no realization reads another's entries.
 ``REALIZATION_CELLS`` cells): the whole solve of a realization by one thread, in
 one kernel launch. ``rows``: every loop over a grid in parallel over segments of
 its columns, the levels of at most ``SERIAL_CELLS`` cells cycled one realization
-per thread.
+per thread. On the CPU (both ways) a level's smoother runs its half-sweeps in
+one pass over the columns, each half-sweep a column behind the one before
+(_gmg_cycle._sweeps_pass): a column is fetched once for all of them; ``rows``
+does so in blocks of ``_BLOCK`` columns, a thread each, then the seams between
+the blocks.
 ``cells``: in parallel over cells (the default on every GPU). Dot products are
 summed the same way in all three, and the three give the same bits.
 
@@ -109,7 +113,7 @@ from ._gmg_cycle import (CG_ROWS, COARSEST_CELLS, MAXITER, N_CONSTS, N_FLAGS, RE
                          _K_DX, _K_DY, _K_GX, _K_GY, _K_INFLOW, _K_PREF, _K_TOL2, _KEEP,
                          _PARALLEL, _RES, _SOL, _SEGMENT, _SIDE_NAMES, _ZEROS, _assemble,
                          _coarsen, _copy_rhs, _factor, _load_guess, _restrict, _scan,
-                         _serial_cycle, _set_carried_rhs, _smooth, vec2)
+                         _serial_cycle, _set_carried_rhs, _smooth, _smooth_blocks, vec2)
 
 # The float32 solve (a backend without float64 kernels: Metal, most integrated
 # GPUs): its tolerance is at least F32_TOL_FLOOR, it also stops where its residual
@@ -623,14 +627,22 @@ class TaichiPressureSolver:
         cells = self.parallel == "cells"
         arrays = (self._op, self._mg, self._geo, self._flags)
         for l in range(self._serial_from):
-            for h in range(2 * SWEEPS):
-                _smooth(*arrays, l, h, 0, cells)
+            self._smooth(arrays, l, 0)
             _restrict(*arrays, l, cells)
         _serial_cycle(self._op, self._mg, self._chol, self._geo, self._flags,
                       self._serial_from)
         for l in reversed(range(self._serial_from)):
+            self._smooth(arrays, l, 1)
+
+    def _smooth(self, arrays, l, post):
+        """The pre- (or ``post``-) smoother of level l: the half-sweeps one kernel
+        each over cells on a GPU, in blocks of columns, each in one pass, on the
+        CPU (the same bits)."""
+        if self.parallel == "cells":
             for h in range(2 * SWEEPS):
-                _smooth(*arrays, l, h, 1, cells)
+                _smooth(*arrays, l, h, post)
+        else:
+            _smooth_blocks(*arrays, l, post)
 
     def state(self) -> dict:
         """What the next solve depends on beyond its kappa: the last solution (its
