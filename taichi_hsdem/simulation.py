@@ -206,11 +206,13 @@ class Simulation:
     # ------------------------------------------------------------------ state
     def state(self) -> dict:
         """Current state as numpy arrays (R, N, ...)."""
-        b = self.bodies
-        return {"x": b.x.to_numpy().astype(float), "theta": b.theta.to_numpy().astype(float),
-                "v": b.v.to_numpy().astype(float), "omega": b.omega.to_numpy().astype(float),
-                "alive": b.alive.to_numpy().astype(bool),
-                "species": self.particles.species_np.copy()}
+        shape = (self.R, self.N, integrate.STATE_COLUMNS)
+        if getattr(self, "_state_buffer", None) is None or self._state_buffer.shape != shape:
+            self._state_buffer = state.array(np.zeros(shape))
+        a = integrate.read_state(self.bodies, self._state_buffer)
+        return {"x": a[..., 0:2].astype(float), "theta": a[..., 2].astype(float),
+                "v": a[..., 3:5].astype(float), "omega": a[..., 5].astype(float),
+                "alive": a[..., 6] != 0, "species": self.particles.species_np.copy()}
 
     def forces(self) -> tuple[np.ndarray, np.ndarray]:
         """Force and moment of the last step on every body (R, N, 2), (R, N)."""

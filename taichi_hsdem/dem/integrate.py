@@ -89,3 +89,32 @@ def read_status(batch, reset_overlap: bool):
     a = batch.status.to_numpy()
     return (a[0].astype(np.int32), a[1].astype(np.int64), a[2].astype(np.int32),
             a[3].astype(float))
+
+
+#: The bodies' arrays :func:`read_state` reads.
+_STATE = Bodies.part("x", "theta", "v", "omega", "alive")
+#: Columns of its buffer: x, y, theta, v_x, v_y, omega, alive.
+STATE_COLUMNS = 7
+
+
+@ti.kernel
+def _state_kernel(bodies: _STATE, out: ti.types.ndarray()):
+    for r, i in ti.ndrange(out.shape[0], out.shape[1]):
+        pos, vel = bodies.x[r, i], bodies.v[r, i]
+        out[r, i, 0] = pos[0]
+        out[r, i, 1] = pos[1]
+        out[r, i, 2] = bodies.theta[r, i]
+        out[r, i, 3] = vel[0]
+        out[r, i, 4] = vel[1]
+        out[r, i, 5] = bodies.omega[r, i]
+        out[r, i, 6] = bodies.alive[r, i]
+
+
+def read_state(bodies, out) -> np.ndarray:
+    """Every body's pose, velocities and whether it is alive, ``(R, N,
+    STATE_COLUMNS)`` in the kernels' float type, read in one transfer into the
+    device buffer ``out`` of that shape (five reads cost five kernel launches
+    and more: at every host check); the values are copied exactly (``alive``
+    is 0 or 1)."""
+    _state_kernel(bodies.pack_of(_STATE), out)
+    return out.to_numpy()

@@ -151,6 +151,26 @@ def _for_cells_of(body: ti.template(), op: ti.template(), mg: ti.template(),
 
 
 @ti.func
+def _for_cells_and_sum_of(body: ti.template(), op: ti.template(), mg: ti.template(),
+                          cg: ti.template(), state: ti.template(), flags: ti.template(),
+                          geo: ti.template(), r, a: ti.template(), ra, b: ti.template(), rb,
+                          part: ti.template()):
+    """_for_cells_of, then _segment_sums_of of ``a[ra] b[rb]`` into ``part[0]``, in
+    one pass: each segment summed right after its cells are done, in the order of
+    _segment_sum (the same bits as the two passes; ``body`` changes only its own
+    cell's entries)."""
+    nx, ny = geo[0, _NX], geo[0, _NY]
+    segments = _segments(ny)
+    for q in range(nx * segments):
+        t = r * nx * segments + q
+        _, i, j0, j1 = _segment(t, nx, ny, segments)
+        first = _index(geo, 0, r, i, 0)
+        for j in range(j0, j1):
+            body(op, mg, cg, state, flags, r, first + j, ny + 1)
+        part[0, t] = _segment_sum(a, ra, b, rb, geo, r, i, j0, j1)
+
+
+@ti.func
 def _segment_sum(a: ti.template(), ra, b: ti.template(), rb, geo: ti.template(), r, i,
                  j0, j1):
     """``sum a[ra] b[rb]`` over cells j0..j1-1 of grid column i of realization r,
@@ -381,10 +401,11 @@ def _solve_one(op: ti.template(), mg: ti.template(), cg: ti.template(), part: ti
     while not checked:
         if ti.static(bodies):
             _product_of(cg, _SOL, _PW, terms, geo, consts, r)
-            _for_cells_of(_residual_b, op, mg, cg, state, flags, geo, r)
+            _for_cells_and_sum_of(_residual_b, op, mg, cg, state, flags, geo, r, mg, _B, mg,
+                                  _B, part)
         else:
-            _for_cells_of(_residual, op, mg, cg, state, flags, geo, r)
-        _segment_sums_of(mg, _B, mg, _B, part, 0, geo, r)
+            _for_cells_and_sum_of(_residual, op, mg, cg, state, flags, geo, r, mg, _B, mg, _B,
+                                  part)
         if ti.static(REAL.dtype == ti.f32):
             _segment_sums_of(mg, _X, mg, _X, part, 1, geo, r)
         _after_check(part, state, flags, r, n, tol2, maxiter)
@@ -399,13 +420,14 @@ def _solve_one(op: ti.template(), mg: ti.template(), cg: ti.template(), part: ti
             flags[r, _FIRST] = 0
             if ti.static(bodies):
                 _product_of(cg, _DIR, _PW, terms, geo, consts, r)
-                _for_cells_of(_matvec_b, op, mg, cg, state, flags, geo, r)
+                _for_cells_and_sum_of(_matvec_b, op, mg, cg, state, flags, geo, r, cg, _DIR,
+                                      cg, _ADIR, part)
             else:
-                _for_cells_of(_matvec, op, mg, cg, state, flags, geo, r)
-            _segment_sums_of(cg, _DIR, cg, _ADIR, part, 0, geo, r)
+                _for_cells_and_sum_of(_matvec, op, mg, cg, state, flags, geo, r, cg, _DIR, cg,
+                                      _ADIR, part)
             _set_alpha(part, state, r, n)
-            _for_cells_of(_update, op, mg, cg, state, flags, geo, r)
-            _segment_sums_of(mg, _B, mg, _B, part, 0, geo, r)
+            _for_cells_and_sum_of(_update, op, mg, cg, state, flags, geo, r, mg, _B, mg, _B,
+                                  part)
             _after_step(part, state, flags, r, n, tol2, maxiter)
 
 
