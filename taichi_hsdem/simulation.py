@@ -32,7 +32,7 @@ import numpy as np
 from . import backend, observables
 from .dem import contact, coupling, fused, integrate, state
 from .layout import BAD_FAST, BAD_NAN, BAD_PASSED, F_HISTORY_OVERFLOW, F_REBUILD
-from .dem.neighbors import NeighborList
+from .dem.neighbors import STALL_BUILDS, STALL_RUNNING, STALL_STEP, NeighborList
 from .geometry.placement import PlacementError, place
 from .geometry.throats import throats_of
 from .observables import Result
@@ -105,6 +105,15 @@ class Simulation:
         if self.fused:
             self.done = state.array(np.zeros(R, dtype=np.int32), state.ti.i32)
             self.builds = state.array(np.zeros(R, dtype=np.int32), state.ti.i32)
+        #: Whether the per-step path rebuilds the neighbour lists on the device
+        #: (NeighborList.rebuild_if_flagged, a GPU's way: no host read per step)
+        #: or when the host has read the rebuild flag after a step (the CPU's).
+        #: The same lists either way.
+        self.device_rebuilds = backend.on_gpu()
+        #: How often a device rebuild overflowed and the batch caught up (a count
+        #: for the curious; it changes nothing).
+        self.stalled_rebuilds = 0
+        self._stall = state.array(np.zeros(STALL_RUNNING + R, dtype=np.int32), state.ti.i32)
         self.fluid = coupling.FluidCoupling(m, R, N) if self.scene.fluid.enabled else None
         self._forces_every_step = (self.fluid is not None
                                    and self.scene.fluid.force_update == "step")
@@ -294,10 +303,21 @@ class Simulation:
                         self.builds, self.dt, m.x_escape)
 
     def _step_per_body(self, n: int):
+        """``n`` steps, three kernels each. On the CPU the host reads the
+        rebuild flag after each step (a read costs less than a launch there); on
+        a GPU the lists are rebuilt on the device (``device_rebuilds``) and the
+        host reads once per call, to catch up after a rebuild that overflowed."""
+        while n > 0:
+            n -= self._steps_per_body(n)
+
+    def _steps_per_body(self, n: int) -> int:
+        """Up to ``n`` steps of the per-step path; how many every realization
+        took (fewer than ``n`` only where a device rebuild overflowed)."""
         m = self.model
         b = self.bodies
         normalize = self.scene.contact.normalize_by_nodes
-        for _ in range(n):
+        device = self.device_rebuilds
+        for s in range(n):
             if self._forces_every_step:
                 self.fluid.apply_forces(b, self.batch, self.particles, self.templates)
             coupling.load_forces(b.force, b.torque, b.f_fluid, b.tau_fluid)
@@ -307,8 +327,30 @@ class Simulation:
             self.history.swap()
             integrate.advance(b, self.batch, self.particles, self.materials, self.neighbors,
                               self.flags, self.dt, m.skin, m.x_escape)
-            if self.flags[F_REBUILD]:
+            if device:
+                self.neighbors.rebuild_if_flagged(b, self.batch, self.particles, self.flags,
+                                                  self._stall, s)
+            elif self.flags[F_REBUILD]:
                 self.rebuild_neighbors()
+        if not device:
+            return n
+        record = self._stall.to_numpy()          # the one read of these n steps
+        self.neighbors.builds += int(record[STALL_BUILDS])
+        if record[STALL_STEP] == 0:
+            self._stall.from_numpy(np.zeros_like(record))
+            return n
+        # Step ``taken`` rebuilt lists that overflowed and every realization
+        # stopped there: the steps after it did nothing but swap the shear
+        # history's two buffers, so the latest is in the newer one when they
+        # were odd in number; then the host grows the lists and rebuilds.
+        taken = int(record[STALL_STEP])
+        self.stalled_rebuilds += 1
+        if (n - taken) % 2:
+            self.history.swap()
+        self.batch.running.from_numpy(record[STALL_RUNNING:].astype(np.int32))
+        self._stall.from_numpy(np.zeros_like(record))
+        self.rebuild_neighbors()
+        return taken
 
     # ------------------------------------------------------------------ fluid
     def update_fluid(self, force: bool = False):

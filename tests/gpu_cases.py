@@ -90,7 +90,37 @@ def solve(arch: str, precision: str, real: str = None) -> dict:
     return out
 
 
-CASES = {"vani": vani, "squares": squares, "solve": solve}
+def rebuild(arch: str, precision: str) -> dict:
+    """The neighbour lists of the hourglass scene's 2 realizations as placed:
+    built by the host's build (a thread per body on a GPU), by the per-step
+    path's device rebuild (``NeighborList.rebuild_if_flagged``, gated by the
+    rebuild flag), and the device rebuild into lists of capacity one, which
+    overflows and must stall the batch (its record and ``running`` after it).
+    A list is its ``nbr_n`` entries, -1 after them."""
+    from taichi_hsdem.layout import F_REBUILD
+    sim = _sim("hourglass24.toml", **{"run.realizations": 2, "run.arch": arch,
+                                      "run.precision": precision, "run.seed": 3,
+                                      "run.stepping": "per_step"})
+    nl = sim.neighbors
+
+    def lists():
+        nbr, n = nl.nbr.to_numpy(), nl.nbr_n.to_numpy()
+        return np.where(np.arange(nbr.shape[2]) < n[..., None], nbr, -1)
+    out = {}
+    sim.rebuild_neighbors()
+    out["host"] = lists()
+    for name, caps in (("device", nl.capacities), ("overflow", (1, 1))):
+        nl.resize(*caps)
+        sim.flags[F_REBUILD] = 1
+        nl.rebuild_if_flagged(sim.bodies, sim.batch, sim.particles, sim.flags, sim._stall, 7)
+        out[f"{name}_stall"] = sim._stall.to_numpy()
+        out[f"{name}_running"] = sim.batch.running.to_numpy()
+        if name == "device":
+            out["device"] = lists()
+    return out
+
+
+CASES = {"vani": vani, "squares": squares, "solve": solve, "rebuild": rebuild}
 
 
 def main():

@@ -21,21 +21,27 @@ SHORT = ["run.t_end=4.0", "feed.region=[14.0, 22.0]", "run.realizations=2",
          "run.seed=3", "run.stop_at_clog=false", "fluid.particle_flux=false"]
 
 
-def run(stepping, extra=(), shrink=False):
+def run(stepping, extra=(), shrink=False, device_rebuilds=False):
     """The hourglass run; ``shrink``: neighbour capacities of one, so that the
     loose initial placement just fits and the denser packing at the neck overflows
-    them in the kernel's own rebuilds."""
+    them in the kernel's own rebuilds; ``device_rebuilds``: the per-step path
+    rebuilds its lists on the device, as on a GPU."""
     caps = (1, 1) if shrink else (8, 16)
     sim = Simulation(load_scene(HOURGLASS, SHORT + [f"run.stepping={stepping}", *extra]),
                      neighbor_capacities=caps)
     sim.initial_caps = (sim.neighbors.cell_cap, sim.neighbors.nbr_cap)
-    advance = sim.advance
-    sim.calls = {"advance": 0}
+    sim.device_rebuilds = device_rebuilds
+    advance, chunk = sim.advance, sim._steps_per_body
+    sim.calls = {"advance": 0, "chunks": 0}
 
     def counted_advance(n=1):
         sim.calls["advance"] += 1
         advance(n)
-    sim.advance = counted_advance
+
+    def counted_chunk(n):
+        sim.calls["chunks"] += 1
+        return chunk(n)
+    sim.advance, sim._steps_per_body = counted_advance, counted_chunk
     res = sim.run()
     return sim, res
 
@@ -78,6 +84,51 @@ def test_overflowing_rebuilds_catch_up(per_step):
     assert (sim.neighbors.cell_cap, sim.neighbors.nbr_cap) != sim.initial_caps   # grown in the run
     assert sim.run_state.launches > sim.calls["advance"]                # and caught up
     _same((sim, res), per_step)
+
+
+@pytest.mark.parametrize("shrink", [False, True])
+def test_device_rebuilds_give_the_host_rebuilds_bits(per_step, shrink):
+    """The per-step path with its lists rebuilt on the device (a GPU's way: a
+    thread per body, no host read per step) gives the bits of the host's
+    rebuilds; with capacities of one a rebuild overflows on the device, the
+    batch stalls there and the host grows the lists and resumes from that step,
+    the shear history's buffers in the right order."""
+    sim, res = run("per_step", shrink=shrink, device_rebuilds=True)
+    assert res.summary["neighbor_builds"] == per_step[1].summary["neighbor_builds"]
+    if shrink:
+        assert (sim.neighbors.cell_cap, sim.neighbors.nbr_cap) != sim.initial_caps
+        assert sim.stalled_rebuilds > 0                      # stalled and resumed
+    else:
+        assert sim.stalled_rebuilds == 0
+        assert sim.calls["chunks"] == sim.calls["advance"]   # one read per chunk
+    _same((sim, res), per_step)
+
+
+def test_a_device_rebuild_that_overflows_mid_chunk_catches_up():
+    """1500 steps in one call, capacities of one: on the device the lists
+    overflow at step 653 (of 1500), the batch stalls for the remaining 847
+    steps of the call (an odd number: the shear history's buffers must be put
+    back in order), the host grows the lists and runs them; the bits are those
+    of the host's rebuilds after every step."""
+    states = {}
+    for device in (False, True):
+        sim = Simulation(load_scene(HOURGLASS, SHORT + ["run.stepping=per_step"]),
+                         neighbor_capacities=(1, 1))
+        sim.device_rebuilds = device
+        taken, chunk = [], sim._steps_per_body
+
+        def counted(n, chunk=chunk, taken=taken):
+            taken.append(chunk(n))
+            return taken[-1]
+        sim._steps_per_body = counted
+        sim.advance(1500)
+        states[device] = sim.state()
+        if device:
+            assert sim.stalled_rebuilds == 1 and taken[0] < 1500 and (1500 - taken[0]) % 2
+        else:
+            assert taken == [1500]
+    for key in ("x", "v", "theta", "omega", "alive"):
+        np.testing.assert_array_equal(states[True][key], states[False][key], err_msg=key)
 
 
 def test_auto_records_its_choice():

@@ -138,6 +138,21 @@ def test_the_vani_scene_ends_where_the_cpu_run_ends(cpu):
     print("vani, largest relative differences:", worst)
 
 
+def test_device_rebuilds_give_the_cpu_lists_and_stall_on_overflow(cpu):
+    # the neighbour lists binned a thread per body on the GPU, by the host's build
+    # and by the per-step path's device rebuild, against the CPU's serial binning:
+    # the same lists, integers equal; too small lists stall the batch at the step
+    gpu = gpu_cases.rebuild("gpu", precision())
+    for key in ("host", "device"):
+        np.testing.assert_array_equal(gpu[key], cpu[f"rebuild.{key}"], err_msg=key)
+    np.testing.assert_array_equal(gpu["device"], gpu["host"])
+    assert (gpu["host"] >= 0).sum() > 0                          # bodies have neighbours
+    assert list(gpu["device_stall"][:2]) == [0, 1]               # rebuilt once, no stall
+    assert list(gpu["device_running"]) == [1, 1]
+    assert list(gpu["overflow_stall"]) == [8, 1, 1, 1]           # stalled at step 7 + 1
+    assert list(gpu["overflow_running"]) == [0, 0]
+
+
 def test_level_set_squares_end_where_the_cpu_run_ends(cpu):
     # the node contacts in two kernels of at most 31 arrays each, with fluid (f64:
     # the float32 run is the vani case's)

@@ -6,15 +6,18 @@ build (the integrator raises a flag). Capacities are fixed arrays with overflow
 flags: the host reads the flag, grows the array and rebuilds, so a contact is
 never dropped silently.
 
-Binning runs serially inside each realization (realizations in parallel), so the
-neighbour order, and with it the order in which forces are summed, is
-reproducible.
+Binning runs serially inside each realization (realizations in parallel) on the
+CPU, a thread per body on a GPU; each body's neighbour list is kept sorted by
+index, so the neighbour order, and with it the order in which forces are summed,
+is reproducible either way. On a GPU the per-step path rebuilds on the device
+when the integrator's flag says so (:func:`rebuild_if_flagged`), without a host
+read per step.
 """
 
 import numpy as np
 
 from .. import backend
-from ..backend import ti  # sets the environment before Taichi loads
+from ..backend import on_gpu, ti  # sets the environment before Taichi loads
 from ..layout import F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD, GEO_H, GEO_OX, GEO_OY, GEO_SKIN
 from .state import Batch, Bodies, Bundle, Particles, array, pack_type
 
@@ -32,6 +35,80 @@ def bin_particles(bodies: Bodies.Pack, batch: Batch.Pack, neighbors: NEIGHBORS,
     for r in range(bodies.x.shape[0]):
         # (the overflow it returns is for the fused stepper; here flags carries it)
         bin_one(bodies, batch, neighbors, flags, r)
+
+
+# The bodies', batch's and particles' arrays a rebuild reads (bin_one, list_one).
+_BIN_BODIES = Bodies.part("x", "alive")
+_BIN_BATCH = Batch.part("running")
+_LIST_PARTICLES = Particles.part("bounding_radius")
+
+
+@ti.func
+def _bin_body(bodies: ti.template(), batch: ti.template(), neighbors: ti.template(),
+              flags: ti.template(), r, i):
+    """Put body i of realization r into its cell, at the slot an atomic count
+    gives it: the order inside a cell then depends on the threads, the
+    neighbour lists do not (list_one sorts them by index)."""
+    if batch.running[r] != 0 and bodies.alive[r, i] != 0:
+        cx, cy = cell_of(neighbors, bodies.x[r, i])
+        c = cx * neighbors.cell_shape[1] + cy
+        slot = ti.atomic_add(neighbors.cell_n[r, c], 1)
+        if slot < neighbors.cell_p.shape[2]:
+            neighbors.cell_p[r, c, slot] = i
+        else:
+            flags[F_CELL_OVERFLOW] = 1
+
+
+@ti.kernel
+def bin_each(bodies: _BIN_BODIES, batch: _BIN_BATCH, neighbors: NEIGHBORS,
+             flags: ti.types.ndarray()):
+    """bin_particles with a thread per body (a GPU's shape): the same cells and
+    counts, each cell's bodies in another order."""
+    R, N = bodies.x.shape[0], bodies.x.shape[1]
+    for r, c in ti.ndrange(R, neighbors.cell_shape[0] * neighbors.cell_shape[1]):
+        neighbors.cell_n[r, c] = 0
+    for r, i in ti.ndrange(R, N):
+        _bin_body(bodies, batch, neighbors, flags, r, i)
+
+
+#: Entries of the per-step path's device rebuild record (rebuild_if_flagged):
+#: the step (counted from 1) whose rebuild overflowed and stalled the batch (0:
+#: none), the rebuilds done since the host last read it, then each realization's
+#: ``running`` as it was when the batch stalled.
+STALL_STEP, STALL_BUILDS, STALL_RUNNING = 0, 1, 2
+
+
+@ti.kernel
+def rebuild_if_flagged(bodies: _BIN_BODIES, batch: _BIN_BATCH, particles: _LIST_PARTICLES,
+                       neighbors: NEIGHBORS, flags: ti.types.ndarray(),
+                       stall: ti.types.ndarray(), step: ti.i32):
+    """The per-step path's rebuild without a host read (a GPU's way): if the
+    integrator raised ``flags[F_REBUILD]``, bin and list every realization on
+    the device, a thread per cell, body, body. A rebuild that overflows a
+    capacity stalls the batch: ``stall`` records the step and each
+    realization's ``running``, and every realization stops running, so the
+    following steps' kernels do nothing until the host, reading ``stall``
+    once per chunk of steps, has grown the lists and resumes from that step."""
+    R, N = bodies.x.shape[0], bodies.x.shape[1]
+    for r, c in ti.ndrange(R, neighbors.cell_shape[0] * neighbors.cell_shape[1]):
+        if flags[F_REBUILD] != 0 and stall[STALL_STEP] == 0:
+            neighbors.cell_n[r, c] = 0
+    for r, i in ti.ndrange(R, N):
+        if flags[F_REBUILD] != 0 and stall[STALL_STEP] == 0:
+            _bin_body(bodies, batch, neighbors, flags, r, i)
+    for r, i in ti.ndrange(R, N):
+        if flags[F_REBUILD] != 0 and stall[STALL_STEP] == 0:
+            list_one(bodies, batch, particles, neighbors, flags, r, i)
+    for _ in range(1):
+        if flags[F_REBUILD] != 0 and stall[STALL_STEP] == 0:
+            if flags[F_CELL_OVERFLOW] != 0 or flags[F_NBR_OVERFLOW] != 0:
+                stall[STALL_STEP] = step + 1
+                for r in range(R):
+                    stall[STALL_RUNNING + r] = batch.running[r]
+                    batch.running[r] = 0
+            else:
+                flags[F_REBUILD] = 0
+                stall[STALL_BUILDS] = stall[STALL_BUILDS] + 1
 
 
 @ti.func
@@ -172,6 +249,13 @@ class NeighborList(Bundle):
         self.nbr = ti.ndarray(ti.i32, shape=self.shape + (self.nbr_cap,))
         self.nbr_n = ti.ndarray(ti.i32, shape=self.shape)
 
+    def rebuild_if_flagged(self, bodies, batch, particles, flags, stall, step: int):
+        """Rebuild on the device if the last step raised ``flags[F_REBUILD]``
+        (:func:`rebuild_if_flagged`); no host read."""
+        rebuild_if_flagged(bodies.pack_of(_BIN_BODIES), batch.pack_of(_BIN_BATCH),
+                           particles.pack_of(_LIST_PARTICLES), self.pack(), flags, stall,
+                           int(step))
+
     def build(self, bodies, batch, particles, flags):
         """Rebuild, growing the capacities until nothing overflows."""
         while True:
@@ -179,7 +263,10 @@ class NeighborList(Bundle):
             flags_np[[F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD]] = 0
             flags.from_numpy(flags_np)
             b, q, nl = bodies.pack(), batch.pack(), self.pack()
-            bin_particles(b, q, nl, flags)
+            if on_gpu():    # a thread per body; on the CPU one per realization
+                bin_each(bodies.pack_of(_BIN_BODIES), batch.pack_of(_BIN_BATCH), nl, flags)
+            else:
+                bin_particles(b, q, nl, flags)
             build_neighbors(b, q, particles.pack(), nl, flags)
             got = flags.to_numpy()
             if got[F_CELL_OVERFLOW]:
