@@ -247,3 +247,31 @@ def test_throat_study_reports_an_ensemble_that_never_clogged():
     assert tool._estimate(none).startswith("- [") and tool._rate(none) == "-"
     some = stats.summarize([4, 4, 4, 4], [True] * 4)      # sum(s) / n_clogged = 4
     assert tool._estimate(some).startswith("4 [") and tool._rate(some) == "0.25"
+
+
+def test_profile_case_splits_a_run_and_sets_its_solve_against_the_floor():
+    """tools/profile_case.py on a short vani run: the phases add up to the wall
+    time, the kernels are listed dearest first, the floor is cells x iterations x
+    bytes / bandwidth; a bad argument is refused in words."""
+    import re
+    import subprocess
+    import sys
+    tool = ROOT / "tools" / "profile_case.py"
+    proc = subprocess.run([sys.executable, str(tool), "disks-0.17-R1", "--sim-time", "0.01",
+                           "--top", "3", "--bandwidth", "10"],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = proc.stdout
+    wall = float(re.search(r"([\d.]+) s wall", out).group(1))
+    phases = [float(v) for v in re.findall(r"^  [a-zA-Z ()]+?\s+(-?[\d.]+) s\s+-?[\d.]+ %", out,
+                                         re.M)]
+    assert len(phases) == 5 and sum(phases) == pytest.approx(wall, abs=0.01)
+    kernels = [float(v) for v in re.findall(r"^ +[\d.]+ % +([\d.]+) s +\d+ x", out, re.M)]
+    assert len(kernels) == 3 and kernels == sorted(kernels, reverse=True)
+    m = re.search(r"(\d+) cells x ([\d.]+) iterations x (\d+) B at 10 GB/s = ([\d.]+) ms", out)
+    cells, iters, per_cell, floor_ms = int(m[1]), float(m[2]), int(m[3]), float(m[4])
+    assert cells == 175 * 61 and per_cell == _load("profile_case").BYTES_PER_CELL_ITERATION
+    assert floor_ms == pytest.approx(1e3 * cells * iters * per_cell / 10e9, rel=0.01, abs=0.06)
+    bad = subprocess.run([sys.executable, str(tool), "disks-0.17-R1", "--top", "0"],
+                         capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert bad.returncode == 2 and "--top must be at least 1" in bad.stderr
