@@ -303,10 +303,11 @@ class Simulation:
                         self.builds, self.dt, m.x_escape)
 
     def _step_per_body(self, n: int):
-        """``n`` steps, three kernels each. On the CPU the host reads the
-        rebuild flag after each step (a read costs less than a launch there); on
-        a GPU the lists are rebuilt on the device (``device_rebuilds``) and the
-        host reads once per call, to catch up after a rebuild that overflowed."""
+        """``n`` steps, three kernels each (four on a GPU). On the CPU the host
+        reads the rebuild flag after each step (a read costs less than a launch
+        there); on a GPU the lists are rebuilt on the device
+        (``device_rebuilds``) and the host reads once per call, to catch up
+        after a rebuild that overflowed."""
         while n > 0:
             n -= self._steps_per_body(n)
 
@@ -337,7 +338,8 @@ class Simulation:
         record = self._stall.to_numpy()          # the one read of these n steps
         self.neighbors.builds += int(record[STALL_BUILDS])
         if record[STALL_STEP] == 0:
-            self._stall.from_numpy(np.zeros_like(record))
+            if record[STALL_BUILDS]:
+                self._stall.from_numpy(np.zeros_like(record))
             return n
         # Step ``taken`` rebuilt lists that overflowed and every realization
         # stopped there: the steps after it did nothing but swap the shear

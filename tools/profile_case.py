@@ -17,11 +17,12 @@ slower than bench.py's, the shares are what to read. Printed:
 * **kernels**: the ``--top`` most expensive offloaded loops (Taichi names a
   kernel's loops ``<kernel>_c<n>_<k>_kernel_<loop>_<kind>``), with their share of
   the profiled time, their count and mean time;
-* **the solve's floor**: cells x CG iterations x the bytes a CG iteration moves per
-  fine cell (``BYTES_PER_CELL_ITERATION``, counted from the kernels below) over the
-  memory bandwidth ``--bandwidth`` (a triad ``y = a x + y`` moved 19-21 GB/s on
-  the 2-core machine of docs/performance.md), and how far the measured solve is
-  from it. Where a realization's grid stays in the cache (the vani grid, 10^4
+* **the solve's floor**: cells x CG iterations (per solve, the most any
+  realization of the batch took: the floor is then an upper bound) x the bytes a
+  CG iteration moves per fine cell (``BYTES_PER_CELL_ITERATION``, counted from
+  the kernels below) over the memory bandwidth ``--bandwidth`` (a triad ``y = a x
+  + y`` moved 19-21 GB/s on the 2-core machine of docs/performance.md), and how
+  far the measured solve is from it. Where a realization's grid stays in the cache (the vani grid, 10^4
   cells, about 1 MB) the floor is not bandwidth but arithmetic, and the ratio
   says how far the solve is from streaming its data once per pass.
 """
