@@ -114,6 +114,7 @@ class Simulation:
         #: for the curious; it changes nothing).
         self.stalled_rebuilds = 0
         self._stall = state.array(np.zeros(STALL_RUNNING + R, dtype=np.int32), state.ti.i32)
+        self._state_buffer = state.array(np.zeros((R, N, integrate.STATE_COLUMNS)))
         self.fluid = coupling.FluidCoupling(m, R, N) if self.scene.fluid.enabled else None
         self._forces_every_step = (self.fluid is not None
                                    and self.scene.fluid.force_update == "step")
@@ -215,9 +216,6 @@ class Simulation:
     # ------------------------------------------------------------------ state
     def state(self) -> dict:
         """Current state as numpy arrays (R, N, ...)."""
-        shape = (self.R, self.N, integrate.STATE_COLUMNS)
-        if getattr(self, "_state_buffer", None) is None or self._state_buffer.shape != shape:
-            self._state_buffer = state.array(np.zeros(shape))
         a = integrate.read_state(self.bodies, self._state_buffer)
         return {"x": a[..., 0:2].astype(float), "theta": a[..., 2].astype(float),
                 "v": a[..., 3:5].astype(float), "omega": a[..., 5].astype(float),

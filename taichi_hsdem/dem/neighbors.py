@@ -46,9 +46,12 @@ _LIST_PARTICLES = Particles.part("bounding_radius")
 @ti.func
 def _bin_body(bodies: ti.template(), batch: ti.template(), neighbors: ti.template(),
               flags: ti.template(), r, i):
-    """Put body i of realization r into its cell, at the slot an atomic count
-    gives it: the order inside a cell then depends on the threads, the
-    neighbour lists do not (list_one sorts them by index)."""
+    """Put body i of realization r (if alive and running) into its cell, at the
+    slot an atomic count gives it; returns 1 if the cell was full. Serially
+    (bin_one) the slots follow the bodies' order; in parallel (_rebuild) the
+    order inside a cell depends on the threads, the neighbour lists do not
+    (list_one sorts them by index)."""
+    overflow = 0
     if batch.running[r] != 0 and bodies.alive[r, i] != 0:
         cx, cy = cell_of(neighbors, bodies.x[r, i])
         c = cx * neighbors.cell_shape[1] + cy
@@ -57,18 +60,8 @@ def _bin_body(bodies: ti.template(), batch: ti.template(), neighbors: ti.templat
             neighbors.cell_p[r, c, slot] = i
         else:
             flags[F_CELL_OVERFLOW] = 1
-
-
-@ti.kernel
-def bin_each(bodies: _BIN_BODIES, batch: _BIN_BATCH, neighbors: NEIGHBORS,
-             flags: ti.types.ndarray()):
-    """bin_particles with a thread per body (a GPU's shape): the same cells and
-    counts, each cell's bodies in another order."""
-    R, N = bodies.x.shape[0], bodies.x.shape[1]
-    for r, c in ti.ndrange(R, neighbors.cell_shape[0] * neighbors.cell_shape[1]):
-        neighbors.cell_n[r, c] = 0
-    for r, i in ti.ndrange(R, N):
-        _bin_body(bodies, batch, neighbors, flags, r, i)
+            overflow = 1
+    return overflow
 
 
 #: Entries of the per-step path's device rebuild record (rebuild_if_flagged):
@@ -76,6 +69,43 @@ def bin_each(bodies: _BIN_BODIES, batch: _BIN_BATCH, neighbors: NEIGHBORS,
 #: none), the rebuilds done since the host last read it, then each realization's
 #: ``running`` as it was when the batch stalled.
 STALL_STEP, STALL_BUILDS, STALL_RUNNING = 0, 1, 2
+
+
+@ti.func
+def _go(flags: ti.template(), stall: ti.template(), gated: ti.template()):
+    """Whether a rebuild runs: always, or (``gated``) when the rebuild flag is
+    up and the batch has not stalled."""
+    go = True
+    if ti.static(gated):
+        go = flags[F_REBUILD] != 0 and stall[STALL_STEP] == 0
+    return go
+
+
+@ti.func
+def _rebuild(bodies: ti.template(), batch: ti.template(), particles: ti.template(),
+             neighbors: ti.template(), flags: ti.template(), stall: ti.template(),
+             gated: ti.template()):
+    """Bin and list every realization in three top-level loops, a thread per
+    cell, body, body (a GPU's shape); ``gated``: only if _go says so."""
+    R, N = bodies.x.shape[0], bodies.x.shape[1]
+    for r, c in ti.ndrange(R, neighbors.cell_shape[0] * neighbors.cell_shape[1]):
+        if _go(flags, stall, gated):
+            neighbors.cell_n[r, c] = 0
+    for r, i in ti.ndrange(R, N):
+        if _go(flags, stall, gated):
+            _bin_body(bodies, batch, neighbors, flags, r, i)
+    for r, i in ti.ndrange(R, N):
+        if _go(flags, stall, gated):
+            list_one(bodies, batch, particles, neighbors, flags, r, i)
+
+
+@ti.kernel
+def rebuild_each(bodies: _BIN_BODIES, batch: _BIN_BATCH, particles: _LIST_PARTICLES,
+                 neighbors: NEIGHBORS, flags: ti.types.ndarray(),
+                 stall: ti.types.ndarray()):
+    """bin_particles and build_neighbors with a thread per body (a GPU's shape):
+    the same cells, counts and lists, each cell's bodies in another order."""
+    _rebuild(bodies, batch, particles, neighbors, flags, stall, False)
 
 
 @ti.kernel
@@ -89,21 +119,12 @@ def rebuild_if_flagged(bodies: _BIN_BODIES, batch: _BIN_BATCH, particles: _LIST_
     realization's ``running``, and every realization stops running, so the
     following steps' kernels do nothing until the host, reading ``stall``
     once per chunk of steps, has grown the lists and resumes from that step."""
-    R, N = bodies.x.shape[0], bodies.x.shape[1]
-    for r, c in ti.ndrange(R, neighbors.cell_shape[0] * neighbors.cell_shape[1]):
-        if flags[F_REBUILD] != 0 and stall[STALL_STEP] == 0:
-            neighbors.cell_n[r, c] = 0
-    for r, i in ti.ndrange(R, N):
-        if flags[F_REBUILD] != 0 and stall[STALL_STEP] == 0:
-            _bin_body(bodies, batch, neighbors, flags, r, i)
-    for r, i in ti.ndrange(R, N):
-        if flags[F_REBUILD] != 0 and stall[STALL_STEP] == 0:
-            list_one(bodies, batch, particles, neighbors, flags, r, i)
+    _rebuild(bodies, batch, particles, neighbors, flags, stall, True)
     for _ in range(1):
-        if flags[F_REBUILD] != 0 and stall[STALL_STEP] == 0:
+        if _go(flags, stall, True):
             if flags[F_CELL_OVERFLOW] != 0 or flags[F_NBR_OVERFLOW] != 0:
                 stall[STALL_STEP] = step + 1
-                for r in range(R):
+                for r in range(bodies.x.shape[0]):
                     stall[STALL_RUNNING + r] = batch.running[r]
                     batch.running[r] = 0
             else:
@@ -127,23 +148,11 @@ def bin_one(bodies: ti.template(), batch: ti.template(), neighbors: ti.template(
             flags: ti.template(), r):
     """Bin the live bodies of realization ``r``, serially (a reproducible order);
     returns 1 if a cell overflowed its capacity."""
-    cap = neighbors.cell_p.shape[2]
-    ncy = neighbors.cell_shape[1]
     overflow = 0
-    for c in range(neighbors.cell_shape[0] * ncy):
+    for c in range(neighbors.cell_shape[0] * neighbors.cell_shape[1]):
         neighbors.cell_n[r, c] = 0
-    if batch.running[r] != 0:
-        for i in range(bodies.x.shape[1]):
-            if bodies.alive[r, i] != 0:
-                cx, cy = cell_of(neighbors, bodies.x[r, i])
-                c = cx * ncy + cy
-                slot = neighbors.cell_n[r, c]
-                if slot < cap:
-                    neighbors.cell_p[r, c, slot] = i
-                else:
-                    flags[F_CELL_OVERFLOW] = 1
-                    overflow = 1
-                neighbors.cell_n[r, c] = slot + 1
+    for i in range(bodies.x.shape[1]):
+        overflow = overflow | _bin_body(bodies, batch, neighbors, flags, r, i)
     return overflow
 
 
@@ -229,6 +238,7 @@ class NeighborList(Bundle):
         self._alloc_nbr()
         self.x_ref = ti.Vector.ndarray(2, backend.real(), shape=self.shape)
         self.builds = 0
+        self._no_stall = array(np.zeros(1), ti.i32)  # rebuild_each's (unread) record
 
     @property
     def capacities(self) -> tuple[int, int]:
@@ -263,11 +273,12 @@ class NeighborList(Bundle):
             flags_np[[F_CELL_OVERFLOW, F_NBR_OVERFLOW, F_REBUILD]] = 0
             flags.from_numpy(flags_np)
             b, q, nl = bodies.pack(), batch.pack(), self.pack()
-            if on_gpu():    # a thread per body; on the CPU one per realization
-                bin_each(bodies.pack_of(_BIN_BODIES), batch.pack_of(_BIN_BATCH), nl, flags)
+            if on_gpu():    # a thread per body; on the CPU binning per realization
+                rebuild_each(bodies.pack_of(_BIN_BODIES), batch.pack_of(_BIN_BATCH),
+                             particles.pack_of(_LIST_PARTICLES), nl, flags, self._no_stall)
             else:
                 bin_particles(b, q, nl, flags)
-            build_neighbors(b, q, particles.pack(), nl, flags)
+                build_neighbors(b, q, particles.pack(), nl, flags)
             got = flags.to_numpy()
             if got[F_CELL_OVERFLOW]:
                 self.cell_cap *= 2
