@@ -36,6 +36,7 @@ import resource
 import subprocess
 import sys
 import time
+from collections import defaultdict
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -103,6 +104,22 @@ def overrides(case, sim_time):
     return scene, ov + extra
 
 
+def time_calls(obj, name, seconds, key, calls=None):
+    """Wrap method ``name`` of ``obj`` so that each call adds its wall time to
+    ``seconds[key]`` (and 1 to ``calls[key]``)."""
+    f = getattr(obj, name)
+
+    def timed(*args, **kwargs):
+        t = time.perf_counter()
+        try:
+            return f(*args, **kwargs)
+        finally:
+            seconds[key] += time.perf_counter() - t
+            if calls is not None:
+                calls[key] += 1
+    setattr(obj, name, timed)
+
+
 def _rss_mb(pid, field="VmHWM"):
     """Peak (VmHWM) or current (VmRSS) resident memory of a process, MB; None if
     unknown."""
@@ -144,16 +161,8 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
         if not samples or t >= samples[-1][0] + t_end / 8:
             samples.append((t, _total_rss_mb()))
 
-    advance_s = [0.0]                # the DEM launches alone (Simulation.advance)
-    advance = sim.advance
-
-    def timed_advance(n=1):
-        t = time.perf_counter()
-        try:
-            advance(n)
-        finally:
-            advance_s[0] += time.perf_counter() - t
-    sim.advance = timed_advance
+    spent = defaultdict(float)       # the DEM launches alone (Simulation.advance)
+    time_calls(sim, "advance", spent, "advance")
     rec = tmp = None
     if video_frames:                 # draw and encode frames too (into a scratch folder)
         from taichi_hsdem.render import VideoRecorder
@@ -203,13 +212,13 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
         "pressure_share": round((fluid_s1 - fluid_s0) / wall, 3),
         "ms_per_solve": round(1000 * (fluid_s1 - fluid_s0) / solves, 2) if solves else None,
         "ms_per_step": round(1000 * wall / steps, 4) if steps else None,
-        # the step without the pressure solves: the DEM's own cost per step
+        # the step without the pressure solves: the DEM and everything else
         "dem_ms_per_step": round(1000 * (wall - (fluid_s1 - fluid_s0)) / steps, 4)
         if steps else None,
         # the DEM launches alone (contacts, motion, neighbour rebuilds): the rest of
         # dem_ms_per_step is the fluid updates' other work (rasterising, held
         # forces, reading the pressure) and the host checks
-        "advance_ms_per_step": round(1000 * advance_s[0] / steps, 4) if steps else None,
+        "advance_ms_per_step": round(1000 * spent["advance"] / steps, 4) if steps else None,
         "fluid_solver": sim.model.fluid_solver if sim.fluid is not None else None,
         # carried volume (implicit coupling) or fixed obstacles: the solve differs
         "particle_flux": sim.scene.fluid.particle_flux if sim.fluid is not None else None,

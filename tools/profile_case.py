@@ -61,7 +61,9 @@ def main(argv=None):
     args = p.parse_args(argv)
     if args.top < 1 or args.bandwidth <= 0:
         p.error("--top must be at least 1 and --bandwidth positive")
-    sim_time = args.sim_time or (0.005 if args.case.startswith("channel") else 0.5)
+    sim_time = args.sim_time
+    if sim_time is None:
+        sim_time = 0.005 if args.case.startswith("channel") else 0.5
     if sim_time <= 0:
         p.error("--sim-time must be positive")
 
@@ -86,22 +88,11 @@ def main(argv=None):
     sim.update_fluid(force=True)
     sim.advance(5)                       # compile every kernel before timing
     phases, calls = defaultdict(float), defaultdict(int)
-
-    def timed(obj, name, phase):
-        f = getattr(obj, name)
-
-        def wrapper(*a, **k):
-            t0 = time.perf_counter()
-            try:
-                return f(*a, **k)
-            finally:
-                phases[phase] += time.perf_counter() - t0
-                calls[phase] += 1
-        setattr(obj, name, wrapper)
-    timed(sim, "advance", "DEM steps (advance)")
-    timed(sim, "update_fluid", "fluid updates")
-    timed(sim.fluid.solver, "solve", "pressure solves")
-    timed(sim, "_check", "host checks")
+    for obj, name, phase in ((sim, "advance", "DEM steps (advance)"),
+                             (sim, "update_fluid", "fluid updates"),
+                             (sim.fluid.solver, "solve", "pressure solves"),
+                             (sim, "_check", "host checks")):
+        bench.time_calls(obj, name, phases, phase, calls)
     stats0 = dict(sim.fluid.solver.stats)
     steps0 = sim.steps
     ti.sync()
