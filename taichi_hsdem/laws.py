@@ -202,6 +202,24 @@ def sphere_spin_range() -> tuple[float, float]:
     return float(t[0, 0]), float(t[-1, 0])
 
 
+#: Apery's constant, zeta(3): the images of a rotlet between two plates sum to it.
+ZETA3 = 1.2020569031595942
+
+
+def sphere_spin_images(d_over_h: float) -> float:
+    """The point rotlet's images between the two plates summed,
+    ``1 / (1 - (3/16) zeta(3) (d/H)^3)``: :func:`sphere_spin_torque` as
+    ``d/H -> 0`` (within 1.3e-7 at d/H = 0.3, the remainder growing like
+    ``(d/H)^10``).
+
+    Examples
+    --------
+    >>> round(sphere_spin_images(0.3), 6)
+    1.006123
+    """
+    return 1.0 / (1.0 - 3.0 / 16.0 * ZETA3 * float(d_over_h) ** 3)
+
+
 def sphere_spin_torque(d_over_h: float) -> float:
     """Viscous torque on a sphere spinning at mid-gap about the plates' normal,
     over its value in unbounded fluid.
@@ -221,19 +239,25 @@ def sphere_spin_torque(d_over_h: float) -> float:
     interpolation is within 3e-4 of the solver (measured at the quarter points,
     the most near contact, where the slope grows like ``-ln(1 - d/H)``).
 
+    Below the table (``0 < d/H < 0.3``) the image sum itself is returned.
+
     Raises
     ------
     ValueError
-        Outside the table's range of d/H (:func:`sphere_spin_range`).
+        Above the table's range of d/H (:func:`sphere_spin_range`), or d/H <= 0.
 
     Examples
     --------
     >>> round(sphere_spin_torque(0.3), 5), round(sphere_spin_torque(0.9), 5)
     (1.00612, 1.21143)
+    >>> round(sphere_spin_torque(0.1), 7)       # the images: 1 + 2.3e-4
+    1.0002254
     """
     from scipy.interpolate import PchipInterpolator
     t = _spin_table()
     lo, hi = t[0, 0], t[-1, 0]
+    if 0.0 < d_over_h < lo:
+        return sphere_spin_images(d_over_h)
     if not lo <= d_over_h <= hi:
         raise ValueError(f"d/H = {d_over_h:.4g} is outside the Stokes table of a spinning "
                          f"sphere at mid-gap ({lo:g} to {hi:g})")

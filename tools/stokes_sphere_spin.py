@@ -115,6 +115,7 @@ HERE = pathlib.Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import stokes_fem  # noqa: E402  (require(): the only way NGSolve is imported)
+from taichi_hsdem.laws import sphere_spin_images as image_sum  # noqa: E402
 
 DATA_DIR = HERE.parent / "taichi_hsdem" / "data"
 DATA_CSV = DATA_DIR / "sphere_spin.csv"
@@ -123,7 +124,6 @@ GAP_CSV = DATA_DIR / "sphere_in_gap.csv"
 TABLE_DH = tuple(row["d_over_H"] for row in stokes_fem.read_table(GAP_CSV, text=("mesh",
                                                                                   "domain")))
 FILM_RINGS = 40             # radii of stokes_fem.film_points (cheap in 2D)
-ZETA3 = 1.2020569031595942
 # The table's error bar: its last digit (7 decimals). The largest change measured
 # against the checks over TABLE_DH (--checks; the header's second line) is 3e-9.
 ERROR_ESTIMATE = "+-1e-7 on spin_torque (its last digit)"
@@ -196,19 +196,6 @@ def preset(name, dh, **overrides):
 
 
 # ------------------------------------------------------------------ closed forms
-
-def image_sum(dh):
-    """The point rotlet's images summed: ``1 / (1 - (3/16) zeta(3) (d/H)^3)``.
-
-    The leading behaviour of ``spin_torque`` as ``d/H -> 0`` (module docstring).
-
-    Examples
-    --------
-    >>> round(image_sum(0.3), 6)
-    1.006123
-    """
-    return 1.0 / (1.0 - 3.0 / 16.0 * ZETA3 * float(dh) ** 3)
-
 
 def jeffery(h_over_a):
     """Jeffery's exact torque coefficient of a sphere spinning about the normal of
