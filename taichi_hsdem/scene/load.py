@@ -14,6 +14,11 @@ that need the built geometry or the particle shapes (``geometry.escape_offset``,
 ``feed.region``, every ``"auto"``) stay ``None`` / ``"auto"``; the simulator
 resolves them and records the values with `Scene.with_values`.
 
+A species with ``diameter_spread`` > 0 is replaced here, once every table is
+checked, by its five size classes (`size_class_factors`, `split_count`): the
+`Scene` and everything after it (resolve, the outputs, ``scene.resolved.toml``)
+see ordinary species of spread 0.
+
 Examples
 --------
 >>> scene = load_scene({
@@ -35,6 +40,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from statistics import NormalDist
 from typing import Any, Iterable, Mapping
 
 import numpy as np
@@ -458,11 +464,131 @@ def _build_scene(raw: Any, label: str, stem: str, origins: Mapping[str, str]) ->
                 species[k] = values
                 shapes[k] = _check_species(values, k, out)
     _check_scene(scene, species, shapes, stem, out)
+    classes = _expand_size_classes(species, shapes, scene["fluid"]["gap"], out)
     if out.lines:
         raise SceneError(out.lines)
     sections = {name: cls(**scene[name]) for name, cls in SECTIONS.items()}
     return Scene(**{name: scene[name] for name in key_specs(Scene)}, **sections,
-                 particles=tuple(SpeciesConfig(**s) for s in species.values()), source=label)
+                 particles=tuple(SpeciesConfig(**s) for s in classes), source=label)
+
+
+# ------------------------------------------------------------ size classes
+
+#: A species with ``diameter_spread`` > 0 becomes this many size classes.
+SIZE_CLASSES = 5
+#: The keys a size class scales: a shape's lengths (``vertices`` point by point).
+_SIZE_KEYS = ("diameter", "side", "width", "height", "vertices")
+#: The order in which the classes take the remainder of a count (middle first).
+_REMAINDER_ORDER = (2, 1, 3, 0, 4)
+
+
+def size_class_factors(spread: float) -> tuple[float, ...]:
+    """The ``SIZE_CLASSES`` size factors ``1 + spread z_k`` of a species with
+    ``diameter_spread = spread``, smallest first.
+
+    ``z_k`` is the mean of a standard normal variable within the k-th of the
+    ``SIZE_CLASSES`` intervals of equal probability, ``K (phi(a_k-1) - phi(a_k))``
+    with ``a_k = Phi^-1(k / K)``, rescaled to unit standard deviation over the
+    classes, so that the factors have mean 1 and standard deviation ``spread``.
+
+    >>> [round(f, 6) for f in size_class_factors(0.1)]
+    [0.852197, 0.943837, 1.0, 1.056163, 1.147803]
+    """
+    normal, k = NormalDist(), SIZE_CLASSES
+    edges = [normal.inv_cdf(i / k) for i in range(1, k)]
+    density = [0.0, *(normal.pdf(a) for a in edges), 0.0]
+    z = [k * (density[i] - density[i + 1]) for i in range(k)]
+    z = [(z[i] - z[k - 1 - i]) / 2.0 for i in range(k)]   # exactly antisymmetric: mean 0
+    scale = math.sqrt(sum(t * t for t in z) / k)
+    return tuple(1.0 + spread * t / scale for t in z)
+
+
+def split_count(count: int) -> list[int]:
+    """``count`` particles over the ``SIZE_CLASSES`` classes, as evenly as possible,
+    the remainder to the middle classes first.
+
+    >>> split_count(12), split_count(9)
+    ([2, 3, 3, 2, 2], [2, 2, 2, 2, 1])
+    """
+    counts = [count // SIZE_CLASSES] * SIZE_CLASSES
+    for i in _REMAINDER_ORDER[:count % SIZE_CLASSES]:
+        counts[i] += 1
+    return counts
+
+
+def _expand_size_classes(species: dict[int, dict], shapes: dict[int, Any], gap: Any,
+                         out: Problems) -> list[dict]:
+    """The species of the run: each one with ``diameter_spread`` > 0 replaced by
+    its ``SIZE_CLASSES`` size classes (``size_class_factors``), each checked as the
+    species' own keys were; a class the checks refuse is reported on the spread."""
+    classes: list[dict] = []
+    for k, v in species.items():
+        spread = v["diameter_spread"]
+        if not good(spread) or spread == 0:
+            classes.append(v)
+            continue
+        where = f"particles[{k}].diameter_spread"
+        if good(v["positions"]):
+            out.add(where, f"{show(spread)} splits the species into {SIZE_CLASSES} size "
+                           "classes, which positions cannot say; give count or "
+                           "packing_fraction instead")
+            continue
+        if good(v["count"]) and v["count"] < SIZE_CLASSES:
+            out.add(where, f"{show(spread)} splits the species into {SIZE_CLASSES} size "
+                           f"classes: count must be at least {SIZE_CLASSES}, got "
+                           f"{v['count']}")
+            continue
+        if shapes.get(k) is None or any(value is BAD for value in v.values()) or not (
+                good(v["count"]) or good(v["packing_fraction"])):
+            continue        # reported already
+        factors = size_class_factors(spread)
+        if factors[0] <= 0.0:
+            out.add(where, f"{show(spread)} gives the smallest class a size factor of "
+                           f"{factors[0]:.6g}, no size at all; use a smaller spread")
+            continue
+        counts = split_count(v["count"]) if good(v["count"]) else None
+        for j, factor in enumerate(factors):
+            table = {key: value for key, value in v.items() if value is not None}
+            for key in _SIZE_KEYS:
+                if key in table:
+                    table[key] = (tuple((factor * x, factor * y) for x, y in table[key])
+                                  if key == "vertices" else factor * table[key])
+            table.update(name=f"{v['name']}/{j + 1}", diameter_spread=0.0)
+            if counts is not None:
+                table["count"] = counts[j]
+            else:
+                table["packing_fraction"] = v["packing_fraction"] / SIZE_CLASSES
+            # the species' own checks, on the class (an empty label: the lines are
+            # reported on the spread that made them)
+            scratch = Problems("", {})
+            values = read_table(SpeciesConfig, table, "", scratch, "shape")
+            shape = _check_species(values, k, scratch) if not scratch.lines else None
+            if scratch.lines or shape is None:
+                why = scratch.lines[0].removeprefix(": ") if scratch.lines else "its shape"
+                out.add(where, f"{show(spread)} makes size class {table['name']} "
+                               f"(size factor {factor:.6g}) invalid: {why}")
+                break
+            d_eq = math.sqrt(4.0 * shape[0] / math.pi)
+            if good(gap) and gap <= MIN_GAP_OVER_DEQ * d_eq:
+                out.add(where, f"{show(spread)} makes size class {table['name']} d_eq = "
+                               f"{d_eq:.6g}, and fluid.gap ({show(gap)}) must exceed (2/3) "
+                               f"d_eq = {MIN_GAP_OVER_DEQ * d_eq:.6g} for the Kozeny-Carman "
+                               "porosity inside it; use a smaller spread or a wider gap")
+                break
+            classes.append(values)
+    names: dict[str, int] = {}
+    for k, v in species.items():
+        if good(v["name"]):
+            names.setdefault(v["name"], k)
+    for k, v in species.items():
+        if good(v["diameter_spread"]) and v["diameter_spread"] > 0 and good(v["name"]):
+            for j in range(SIZE_CLASSES):
+                name = f"{v['name']}/{j + 1}"
+                if name in names:
+                    out.add(f"particles[{k}].name", f"its size class {show(name)} "
+                            f"(diameter_spread) is the name of particles[{names[name]}]")
+                    break
+    return classes
 
 
 # -------------------------------------------------------------------- overrides
