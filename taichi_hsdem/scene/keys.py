@@ -133,6 +133,11 @@ class FluidConfig(Config):
 
     enabled: bool = keyfield("bool", "false: no pressure solve, no fluid force", True)
     viscosity: float | None = keyfield("float", "eta, Pa s (required while enabled)", gt=0)
+    density: float = keyfield("float", "fluid density, kg/m^3: with the particles' density "
+                             "it sets their buoyant weight against the plates "
+                             "(particles.plate_friction; 0: dry particles)", 1000.0, ge=0)
+    gravity: float = keyfield("float", "gravity normal to the plates, m/s^2 (0: a cell on "
+                             "edge, or weightless)", 9.81, ge=0)
     gap: float = keyfield("float", "H, plate spacing and particle thickness, m",
                          required=True, gt=0)
     cell_size: float | str = keyfield("float", 'fluid cell edge, m; "auto": smallest '
@@ -302,6 +307,20 @@ class SpeciesConfig(Config):
     vertices: tuple[tuple[float, float], ...] | None = keyfield(
            "points", "body-frame outline [x, y] (recentred on its centroid by the run), m",
            required=True, min_len=3, max_len=MAX_PARTICLE_VERTICES, only=("polygon",))
+    diameter_spread: float = keyfield(
+           "float", "relative standard deviation of the particle size, dimensionless; 0: "
+           "all alike. A spread s > 0 splits the species, when the scene is loaded, into "
+           "five equally populated size classes <name>/1 to <name>/5 (smallest first): "
+           "ordinary species whose sizes (diameter, side, width and height, or vertices) "
+           "are this species' times 1 + s z_k, z_k the mean of a standard normal within "
+           "each fifth of its probability (-1.3998, -0.5319, 0, 0.5319, 1.3998) rescaled "
+           "to unit standard deviation (-1.4780, -0.5616, 0, 0.5616, 1.4780), so that the "
+           "five factors have mean 1 and standard deviation s exactly. count (at least 5) "
+           "is split as evenly as possible, the remainder to the middle classes first "
+           "(3, 2, 4, 1), packing_fraction into five equal parts, every other key copied; "
+           "not with positions. The resolved scene lists the five classes (spread 0, so "
+           "that it reruns the same particles) and summary.json counts escapees per class",
+           0.0, ge=0, le=0.25)
     count: int | None = keyfield("int", "particles in the control volume (or "
                                 "packing_fraction, or positions)", ge=0)
     positions: tuple[tuple[float, float, float], ...] | None = keyfield(
@@ -347,6 +366,21 @@ class SpeciesConfig(Config):
            "moving obstacle; \"auto\": the share at which a lone drifting particle leaves "
            "the depth-averaged pressure dipole of a sphere of diameter d_eq at mid-gap "
            "(3D Stokes)", AUTO, auto=True, ge=0, le=2)
+    spin_drag: float | str = keyfield(
+           "float", "viscous torque per unit spin of a particle of this species about the "
+           "plates' normal, beyond what the global damping gives (xi I), N m s: implicit in "
+           "the integrator, stable at any time step; \"auto\": a sphere of diameter d_eq at "
+           "mid-gap spinning between the plates, 8 pi eta (d_eq/2)^3 times its 3D Stokes "
+           "factor (taichi_hsdem/data/sphere_spin.csv; below d/H = 0.3 its images' sum), "
+           "less xi I, at least 0; 0 without fluid or above the table (d/H > 0.975)", AUTO,
+           auto=True, ge=0)
+    plate_friction: float = keyfield(
+           "float", "Coulomb coefficient between a particle and the plate it rests on, "
+           "dimensionless; 0: no plate contact. A particle denser (lighter) than the fluid "
+           "settles on the lower (upper) plate and meets a friction force of at most this "
+           "times its buoyant weight, |rho_p - rho_f| g pi d_eq^3 / 6, against its sliding "
+           "(regularised: below the limit it creeps at 1e-3 d_eq xi times the load over the "
+           "limit)", 0.0, ge=0)
 
     def area(self) -> float:
         """Area of the shape, m^2."""
