@@ -34,6 +34,7 @@ from ..backend import ti  # sets the environment before Taichi loads
 from ..fluid import PressureSolver
 from ..fluid.gmg import REAL, BodyTerms, TaichiPressureSolver
 from . import state
+from .integrate import plate_rate
 from .kmath import cross, exp_neg, node_world, rot, rot_t, sin_cos, spin, template_sample
 from ..layout import SAMPLING
 
@@ -44,6 +45,8 @@ vec2 = ti.math.vec2
 # the parts of the bundles they read (state.Bundle.part), not whole bundles.
 _POSE = state.Bodies.part("x", "theta", "alive")
 _HELD = state.Bodies.part("x", "theta", "alive", "f_fluid", "tau_fluid")
+# what body_drift reads of the particles: inertia, spin drag and plate friction
+_DRAG = state.Particles.part("species", "mass", "inertia", "spin", "plate", "creep")
 _LEVEL_SETS = state.Templates.part("is_circle", "radius", "ls_phi", "ls_grad", "ls_meta",
                                    "ls_geo")
 _NODES = state.Templates.part("node_pos", "node_area", "node_meta")
@@ -163,9 +166,8 @@ def _interval_shares(y):
 
 
 @ti.kernel
-def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), sp: ti.types.ndarray(),
-               mass: ti.types.ndarray(), inertia: ti.types.ndarray(), xi: ti.types.ndarray(),
-               carried: ti.types.ndarray(), terms: _DRIFT):
+def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), particles: _DRAG,
+               xi: ti.types.ndarray(), carried: ti.types.ndarray(), terms: _DRIFT):
     """fluid.gmg.BodyTerms of every body but ``owner``: its mean velocity over the
     next fluid interval if the force it felt over the last one were held,
     ``drift = alpha v0 + g T F / m``, and how that changes with the pressure
@@ -175,7 +177,9 @@ def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), sp: ti.ty
     velocity and whether it was in play then), ``F T = m (dv + xi dx)``; for a
     body without that history (just placed or re-inserted), the pressure force
     ``f`` of the last pressure at its present pose and the external load. Then
-    ``past`` is set to now. Both terms are scaled by the species' carried
+    ``past`` is set to now. The spin relaxes at ``xi + spin`` (the spin drag
+    over the inertia), the translation at ``xi`` plus the plate friction's rate
+    at the present speed. Both terms are scaled by the species' carried
     fraction: the solve's source is the flux the body's cells carry, ``c`` times
     its velocity (docs/model.md section 3.4)."""
     for r, i in ti.ndrange(bodies.v.shape[0], bodies.v.shape[1]):
@@ -194,23 +198,27 @@ def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), sp: ti.ty
                          ti.cast(bodies.omega[r, i], REAL.dtype)], dt=REAL.dtype)
         play = running[r] != 0 and bodies.alive[r, i] != 0
         if play:
-            k = ti.cast(xi[sp[i]], REAL.dtype)
-            alpha, g = _interval_shares(k * interval)
-            inert = ti.Vector([ti.cast(mass[i], REAL.dtype), ti.cast(mass[i], REAL.dtype),
-                               ti.cast(inertia[i], REAL.dtype)], dt=REAL.dtype)
+            kv = ti.cast(xi[particles.species[i]], REAL.dtype) + ti.cast(
+                plate_rate(particles, i, bodies.v[r, i]), REAL.dtype)
+            k = ti.Vector([kv, kv, ti.cast(xi[particles.species[i]] + particles.spin[i], REAL.dtype)],
+                          dt=REAL.dtype)
+            inert = ti.Vector([ti.cast(particles.mass[i], REAL.dtype),
+                               ti.cast(particles.mass[i], REAL.dtype),
+                               ti.cast(particles.inertia[i], REAL.dtype)], dt=REAL.dtype)
             impulse = ti.Vector([0.0, 0.0, 0.0], dt=REAL.dtype)   # (mean force) T / inertia
             if terms.past[r, i, 6] != 0:
                 for q in ti.static(range(3)):
                     impulse[q] = ((vel[q] - terms.past[r, i, 3 + q])
-                                  + k * (now[q] - terms.past[r, i, q]))
+                                  + k[q] * (now[q] - terms.past[r, i, q]))
             else:
                 held, ext = bodies.f_fluid[r, i], bodies.f_ext[r, i]
                 load = ti.Vector([ti.cast(held.x + ext.x, REAL.dtype), ti.cast(held.y + ext.y, REAL.dtype),
                                   ti.cast(bodies.tau_fluid[r, i] + bodies.tau_ext[r, i],
                                           REAL.dtype)], dt=REAL.dtype)
                 impulse = load * interval / inert
-            c = ti.cast(carried[sp[i]], REAL.dtype)
+            c = ti.cast(carried[particles.species[i]], REAL.dtype)
             for q in ti.static(range(3)):
+                alpha, g = _interval_shares(k[q] * interval)
                 terms.mobility[r, i, q] = c * (gap * g * interval / inert[q])
                 terms.drift[r, i, q] = c * (alpha * vel[q] + g * impulse[q])
         for q in ti.static(range(3)):
@@ -402,8 +410,8 @@ class FluidCoupling:
                                  mobility=self.terms.mobility, drift=self.terms.drift,
                                  drift_consts=consts)
         REAL.dtype = self.solver.real   # body_drift computes in the solve's float type
-        body_drift(b.pack(), batch.running, particles.species, particles.mass,
-                   particles.inertia, materials.xi, materials.carry, self._drift)
+        body_drift(b.pack(), batch.running, particles.pack_of(_DRAG), materials.xi,
+                   materials.carry, self._drift)
         return self.terms
 
     def _source_velocities(self, bodies):

@@ -1,10 +1,17 @@
 """Explicit integration with global damping (docs/model.md section 1).
 
     v     <- [(1 - xi dt/2) v     + dt F/m] / (1 + xi dt/2)
-    omega <- [(1 - xi dt/2) omega + dt M/I] / (1 + xi dt/2)
+    omega <- [(1 - xi dt/2) omega + dt M/I] / (1 + xi dt/2 + zeta dt)
+    (and + plate friction's rate in v's denominator, below)
     x     <- x + dt v,   theta <- theta + dt omega
 
-``xi`` is per species (``damping.xi = "auto"`` depends on the density). The same
+``xi`` is per species (``damping.xi = "auto"`` depends on the density); the
+velocity's denominator also holds the plate friction's drag rate where the
+particle rests on a plate (:func:`plate_rate`, from the velocity before the step:
+the Coulomb limit over the speed, implicit). ``zeta``,
+per particle, is its spin drag over its inertia (``particles.spin_drag``: the
+viscous torque of the plates beyond ``xi I``), taken implicitly (backward Euler),
+so that it damps without oscillating however large ``zeta dt`` is. The same
 kernel adds the external loads ``f_ext``, ``tau_ext`` (zero unless set through
 :meth:`Simulation.set_external_load`) and watches for what makes a step untrustworthy: non-finite values and bodies
 moving more than a quarter of their size in one step (flag per realization), and
@@ -32,15 +39,29 @@ def advance_kernel(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.
 
 
 @ti.func
+def plate_rate(particles: ti.template(), i, v):
+    """The plate friction of particle ``i`` at velocity ``v`` as a drag rate,
+    1/s: the Coulomb limit over the mass (``plate``) over the speed, the speed
+    taken at least ``creep``, so that a sliding particle meets the limit against
+    its motion and a held one a drag that stops it but for a creep (0 without
+    plate contact)."""
+    rate = 0.0
+    if particles.plate[i] > 0.0:
+        rate = particles.plate[i] / ti.max(v.norm(), particles.creep[i])
+    return rate
+
+
+@ti.func
 def advance_body(bodies: ti.template(), batch: ti.template(), particles: ti.template(),
                  materials: ti.template(), neighbors: ti.template(), dt, skin, x_escape, r, i):
     """One step of body ``i`` of realization ``r``; True when it has moved half the
     Verlet skin since the last neighbour build."""
     damp = materials.xi[particles.species[i]] * dt * 0.5
     vn = ((1.0 - damp) * bodies.v[r, i]
-          + dt * (bodies.force[r, i] + bodies.f_ext[r, i]) / particles.mass[i]) / (1.0 + damp)
+          + dt * (bodies.force[r, i] + bodies.f_ext[r, i]) / particles.mass[i]) / (
+              1.0 + damp + dt * plate_rate(particles, i, bodies.v[r, i]))
     wn = ((1.0 - damp) * bodies.omega[r, i] + dt * (bodies.torque[r, i] + bodies.tau_ext[r, i])
-          / particles.inertia[i]) / (1.0 + damp)
+          / particles.inertia[i]) / (1.0 + damp + dt * particles.spin[i])
     xn = bodies.x[r, i] + dt * vn
     bodies.v[r, i] = vn
     bodies.omega[r, i] = wn

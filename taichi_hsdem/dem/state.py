@@ -187,11 +187,18 @@ class Batch(Bundle):
 @bundle
 class Particles(Bundle):
     """Constant per particle, ``(N,)``: species (which is also the shape template's
-    index: one template per species), mass, moment of inertia, equivalent
-    diameter, disk radius (the analytic path) and bounding radius."""
+    index: one template per species), mass, moment of inertia, spin drag over
+    inertia (``spin``, 1/s: the rate at which the viscous torque beyond the global
+    damping slows its spin), plate friction limit over mass (``plate``, N/kg, 0
+    without plate contact) and the speed below which it turns viscous (``creep``,
+    m/s), equivalent diameter, disk radius (the analytic path) and bounding
+    radius."""
     species: Array
     mass: Array
     inertia: Array
+    spin: Array
+    plate: Array
+    creep: Array
     d_eq: Array
     disk_radius: Array
     bounding_radius: Array
@@ -207,6 +214,9 @@ class Particles(Bundle):
 
         return cls(species=array(spp, ti.i32), mass=per_particle(lambda s: s.mass),
                    inertia=per_particle(lambda s: s.inertia),
+                   spin=per_particle(lambda s: s.spin_drag / s.inertia),
+                   plate=per_particle(lambda s: s.plate),
+                   creep=per_particle(lambda s: s.creep),
                    d_eq=per_particle(lambda s: s.d_eq),
                    disk_radius=per_particle(lambda s: s.shape.radius),
                    bounding_radius=per_particle(lambda s: s.shape.bounding_radius),

@@ -35,9 +35,9 @@ from .domain import (_bounding_box, _check_feed, _check_fit, _check_steps, _flui
 from .model import (FLUID_CELLS_PER_D, MIN_FLUID_CELLS_ACROSS_CONSTRICTION,
                     MIN_FLUID_CELLS_PER_DIAMETER, MIN_WALL_CELLS_PER_DIAMETER, NODE_BYTES,
                     SKIN_FRACTION, UPDATE_CELL_FRACTION, Model, Species, _Resolution, _size_keys)
-from .particles import (_auto_nodes, _check_nodes, _drift, _ls_spacing, _stiffness,
-                        auto_node_spacing, critical_time_step, node_gap, node_sagitta,
-                        pair_table, species_shape, wall_table)
+from .particles import (_auto_nodes, _check_nodes, _drift, _ls_spacing, _plate,
+                        _spin_drag, _stiffness, auto_node_spacing, critical_time_step,
+                        node_gap, node_sagitta, pair_table, species_shape, wall_table)
 
 __all__ = ["resolve", "Model", "Species", "species_shape", "auto_node_spacing", "node_gap",
            "node_sagitta", "critical_time_step", "open_channel_speed", "pair_table",
@@ -199,10 +199,13 @@ def _resolve(scene: Scene, arch: str) -> Model:
                               f"{key}.density, {_size_keys(k, sp)}, fluid.gap", "kg m^2")
         ls = _ls_spacing(res, k, sp, t, widths[k], all_disks)
         xi, carried = _drift(res, scene, sp, t, kp, kappa_free, k)
+        spin = _spin_drag(res, scene, sp, t, xi, inertia, k)
+        plate, creep = _plate(res, scene, sp, t, mass, xi, k)
         species.append(Species(name=sp.name, shape=t, count=count, density=sp.density,
                                mass=mass, inertia=inertia, d_eq=t.equivalent_diameter, kn=0.0,
                                ks=0.0, friction=sp.friction, restitution=sp.restitution,
-                               xi=xi, kappa=kp, carried=carried, ls_spacing=ls))
+                               xi=xi, kappa=kp, carried=carried, ls_spacing=ls,
+                               spin_drag=spin, plate=plate, creep=creep))
     # "auto" depends on each species' density and permeability: record every
     # species' value, and as damping.xi their count-weighted mean (then unused).
     for k, s in enumerate(species):

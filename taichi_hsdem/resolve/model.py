@@ -47,6 +47,11 @@ UPDATE_CELL_FRACTION = 1.0    # fluid cells a particle may cross between auto-in
                               # realizations per point: 0.5 and 1 cell agree, 2 and 3 cells
                               # give fewer escapees; README, Accuracy)
 MAX_TRAVEL_BETWEEN_SOLVES = 0.5  # diameters a particle may move between solves, at most
+# Plate friction is regularised below the creep speed PLATE_CREEP * d_eq * xi (a
+# thousandth of a diameter per damping time): a particle held below the Coulomb
+# limit creeps at most that fast, 1e-3 d per second at xi = 1000/s, against the
+# millimetres per second of the flow; the drag that regularises it is implicit.
+PLATE_CREEP = 1.0e-3
 # Taichi backends on which "auto" stepping stays per-step (one realization per thread
 # would leave a GPU idle).
 GPU_ARCHS = ("cuda", "vulkan", "metal", "opengl", "dx11", "dx12", "amdgpu", "gles")
@@ -70,6 +75,9 @@ class Species:
     kappa: float          # Kozeny-Carman permeability inside the particle (0 without fluid)
     carried: float        # share of its velocity its cells carry in the pressure solve
     ls_spacing: float | None
+    spin_drag: float = 0.0  # viscous torque per unit spin beyond xi I, N m s (implicit)
+    plate: float = 0.0      # plate friction limit over the mass, N/kg (0: no plate contact)
+    creep: float = 0.0      # speed below which plate friction turns viscous, m/s
 
 
 @dataclass

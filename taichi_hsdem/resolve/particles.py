@@ -19,7 +19,7 @@ from ..scene import Scene
 from ..scene.keys import AUTO, shape_vertex_count
 from .model import (LS_DIAMETER_CELLS, LS_THINNEST_CELLS, MIN_LS_CELLS_PER_DIAMETER,
                     MIN_LS_THINNEST_CELLS, NODE_BYTES, NODE_WIDTH_FRACTION, PAPER_NODES,
-                    Species, _Resolution)
+                    PLATE_CREEP, Species, _Resolution)
 
 
 def species_shape(sp, spacing: float | None = None) -> shp.Shape:
@@ -289,6 +289,69 @@ def _drift(res: _Resolution, scene: Scene, sp, t: shp.Shape, kp: float, kappa_fr
                      lambda: lgs.drift_damping(f.viscosity, sp.density, kappa_free, kp, drift,
                                                carried), keys, "1/s")
     return xi, 1.0 if carried is None else carried
+
+
+def _spin_drag(res: _Resolution, scene: Scene, sp, t: shp.Shape, xi: float, inertia: float,
+               k: int) -> float:
+    """Spin resistance of species ``k`` beyond its global damping, N m s.
+
+    ``"auto"``: the torque per unit spin of a sphere of diameter ``d_eq`` at
+    mid-gap turning about the plates' normal, ``8 pi eta a^3 f(d/H)`` (3D
+    Stokes, :func:`taichi_hsdem.laws.sphere_spin_torque`), less the ``xi I``
+    that the global damping already applies to the spin, so that a lone
+    particle's spin decays at the sphere's rate (docs/model.md section 1.3); 0
+    without fluid, above the table or where the damping already resists more.
+    A non-circular particle takes the sphere of its ``d_eq`` (an approximation:
+    the table is for spheres)."""
+    key = f"particles.{k}.spin_drag"
+    if sp.spin_drag != AUTO:
+        res.values[key] = float(sp.spin_drag)
+        return float(sp.spin_drag)
+    f = scene.fluid
+    if not f.enabled:
+        res.note(key, 0.0, "no fluid: no viscous torque")
+        return 0.0
+    d = t.equivalent_diameter
+    try:
+        factor = lgs.sphere_spin_torque(d / f.gap)
+    except ValueError as exc:
+        res.note(key, 0.0, f"{exc}: none beyond the global damping")
+        return 0.0
+    sphere = 8.0 * math.pi * f.viscosity * (0.5 * d) ** 3 * factor
+    extra = max(0.0, sphere - xi * inertia)
+    what = "a sphere" if t.kind == "circle" else "a sphere of the same d_eq"
+    res.note(key, extra, f"{what} at mid-gap, d/H = {d / f.gap:.4g}, spinning about the "
+             f"plates' normal: 8 pi eta a^3 x {factor:.4g} (3D Stokes) = {sphere:.4g} N m s, "
+             f"less xi I = {xi * inertia:.4g}")
+    return extra
+
+
+def _plate(res: _Resolution, scene: Scene, sp, t: shp.Shape, mass: float, xi: float,
+           k: int) -> tuple[float, float]:
+    """``(limit, creep)`` of species ``k``'s contact with the plate it settles on:
+    the Coulomb limit ``mu_p |rho_p - rho_f| g pi d_eq^3 / 6`` over the mass
+    (N/kg; the buoyant weight of the sphere of diameter ``d_eq``, the 3D particle,
+    whatever the prism's mass) and the speed below which it turns viscous
+    (docs/model.md section 1.4); ``(0, 0)`` without plate friction."""
+    key = f"particles[{k}]"
+    if sp.plate_friction == 0.0:
+        return 0.0, 0.0
+    f = scene.fluid
+    d = t.equivalent_diameter
+    weight = abs(sp.density - f.density) * f.gravity * math.pi * d ** 3 / 6.0
+    if weight == 0.0:
+        res.notes[f"particles.{k}.plate_friction"] = (
+            "no buoyant weight (neutrally buoyant, or fluid.gravity = 0): no plate contact")
+        return 0.0, 0.0
+    limit = res.derived(f"plate friction of particles[{k}]",
+                        lambda: sp.plate_friction * weight / mass,
+                        f"{key}.plate_friction, {key}.density, fluid.density, fluid.gravity",
+                        "N/kg")
+    plate = "lower" if sp.density > f.density else "upper"
+    res.notes[f"particles.{k}.plate_friction"] = (
+        f"settles on the {plate} plate: friction up to {sp.plate_friction:g} x "
+        f"{weight:.4g} N (buoyant weight of the sphere of d_eq)")
+    return limit, PLATE_CREEP * d * xi
 
 
 def _driving_pressure(scene: Scene, geom: wl.Geometry, species: list[Species]) -> tuple[float, str]:
