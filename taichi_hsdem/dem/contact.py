@@ -42,7 +42,8 @@ from ..backend import on_gpu, ti  # sets the environment before Taichi loads
 from .kmath import cross, node_world, rot, rot_t, sin_cos, spin, template_sample, wall_sample
 from ..layout import BAD_PASSED, F_HISTORY_OVERFLOW, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
 from .neighbors import NEIGHBORS
-from .state import Batch, Bodies, Materials, Particles, ShearHistory, Templates, WallGrid
+from .state import (CONTACT_PARTICLES, Batch, Bodies, Materials, ShearHistory, Templates,
+                    WallGrid)
 
 vec2 = ti.math.vec2
 
@@ -148,7 +149,7 @@ def store_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.templat
 
 
 @ti.kernel
-def ls_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pack,
+def ls_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: CONTACT_PARTICLES,
                 materials: Materials.Pack, templates: Templates.Pack, walls: WallGrid.Pack,
                 history: ShearHistory.Pack, neighbors: NEIGHBORS, flags: ti.types.ndarray(),
                 slots: ti.template(), dt: float, normalize: ti.i32):
@@ -165,7 +166,7 @@ def ls_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pac
 
 
 @ti.kernel
-def ls_pair_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pack,
+def ls_pair_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: CONTACT_PARTICLES,
                      materials: Materials.Pack, templates: Templates.Pack,
                      history: ShearHistory.Pack, neighbors: NEIGHBORS, flags: ti.types.ndarray(),
                      part_f: ti.types.ndarray(), part_m: ti.types.ndarray(),
@@ -187,7 +188,7 @@ def ls_pair_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particle
 
 
 @ti.kernel
-def ls_wall_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pack,
+def ls_wall_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: CONTACT_PARTICLES,
                      materials: Materials.Pack, templates: Templates.Pack, walls: WallGrid.Pack,
                      history: ShearHistory.Pack, flags: ti.types.ndarray(),
                      part_f: ti.types.ndarray(), part_m: ti.types.ndarray(),
@@ -403,7 +404,7 @@ def ls_walls(bodies: ti.template(), particles: ti.template(), materials: ti.temp
 
 
 @ti.kernel
-def disk_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles.Pack,
+def disk_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: CONTACT_PARTICLES,
                   materials: Materials.Pack, walls: WallGrid.Pack, history: ShearHistory.Pack,
                   neighbors: NEIGHBORS, flags: ti.types.ndarray(), slots: ti.template(),
                   dt: float):
@@ -496,7 +497,7 @@ def add_forces(bodies, batch, particles, materials, templates, walls, history, n
     analytic disk law when ``disks`` (every particle a circle), else the level-set
     node law; writes the new shear history (``history.new``) and the deepest
     overlap of each realization (``batch.max_overlap``)."""
-    packs = (bodies.pack(), batch.pack(), particles.pack(), materials.pack())
+    packs = (bodies.pack(), batch.pack(), particles.pack_of(CONTACT_PARTICLES), materials.pack())
     if disks:
         disk_contacts(*packs, walls.pack(), history.pack(), neighbors.pack(), flags,
                       history.slots, dt)

@@ -223,6 +223,13 @@ class Particles(Bundle):
                    species_np=spp)
 
 
+#: What the contact kernels read of the particles: the integrator's own
+#: per-particle rates stay out of their argument lists (Taichi's x64 backend takes
+#: at most 64 argument elements a kernel).
+CONTACT_PARTICLES = Particles.part("species", "mass", "d_eq", "disk_radius",
+                                   "bounding_radius")
+
+
 @bundle
 class Materials(Bundle):
     """``pair`` (S, S, N_PAIR) and ``wall`` (S, N_PAIR): kn, ks, mu, c_e
