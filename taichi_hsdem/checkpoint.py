@@ -36,7 +36,7 @@ import numpy as np
 
 from . import backend
 from .digest import code_digest
-from .runstate import ARRAY_FIELDS, RealizationResult, RunState
+from .runstate import ARRAY_FIELDS, ArchRecord, RealizationResult, RunState
 from .scene import SceneError, load_scene, scene_to_toml
 from .scene.toml import parse_toml, tomllib
 
@@ -45,6 +45,9 @@ FORMAT = 1
 # runstate.RealizationResult's fields and the statuses it takes.
 RESULT_KEYS = tuple(f.name for f in dataclasses.fields(RealizationResult))
 RESULT_STATUSES = ("ok", "unstable")
+# runstate.ArchRecord's fields and the failures a broken arch takes.
+ARCH_KEYS = tuple(f.name for f in dataclasses.fields(ArchRecord))
+ARCH_FAILURES = ("escaped", "rolled", "slid")
 # The run state's arrays (runstate.ARRAY_FIELDS) are stored as host.<field>; its
 # other fields in the header's host record, beside the neighbour lists' and the
 # fluid coupling's counters.
@@ -241,6 +244,14 @@ def _check_host(host, path) -> None:
             and all(_is_int(v) and v >= 0 for v in row[2:]) for row in network):
         bad("network", "must be rows [realization, t, injected, throats clogged] with t "
                        "in [0, host.t]")
+    arches = host.get("arches")
+    if not isinstance(arches, list):
+        bad("arches", "missing or not a list (a checkpoint of an earlier version: run the "
+                      "scene again from the start)")
+    for k, arch in enumerate(arches):
+        if not _is_arch(arch, R, t):
+            bad(f"arches[{k}]", f"not an arch record (keys {sorted(ARCH_KEYS)}: members with "
+                                "their positions and angles, times in [0, host.t])")
     caps = host.get("neighbor_caps")
     if not isinstance(caps, list) or len(caps) != 2 or not all(
             _is_int(c) and c >= 1 for c in caps):
@@ -256,6 +267,25 @@ def _check_host(host, path) -> None:
                 _is_int(fl.get(k)) and fl[k] >= 0 for k in ("updates", "solves")) or not (
                 _is_real(fl.get("seconds")) and fl["seconds"] >= 0):
             bad("fluid", "must hold counters updates, solves >= 0 and seconds >= 0")
+
+
+def _is_arch(a, R, t) -> bool:
+    """An arch record of the census (runstate.ArchRecord): its keys, its members
+    (ids >= 0, each with a finite position and angle), its realization and times
+    (formed, then broken, in [0, t]) and its failure (none while it holds)."""
+    if not isinstance(a, dict) or set(a) != set(ARCH_KEYS):
+        return False
+    ids, xs, ths, broken = a["ids"], a["x"], a["theta"], a["t_broken"]
+    members = (isinstance(ids, list) and ids and all(_is_int(i) and i >= 0 for i in ids)
+               and isinstance(xs, list) and len(xs) == len(ids)
+               and all(isinstance(p, list) and len(p) == 2 and all(map(_is_real, p)) for p in xs)
+               and isinstance(ths, list) and len(ths) == len(ids) and all(map(_is_real, ths)))
+    held = broken is None and a["failure"] is None and a["watching"] is False
+    failed = (_is_real(broken) and _is_real(a["t_formed"]) and a["t_formed"] <= broken <= t
+              and a["failure"] in ARCH_FAILURES and isinstance(a["watching"], bool))
+    return bool(members and _is_int(a["realization"]) and 0 <= a["realization"] < R
+                and _is_int(a["arch"]) and a["arch"] >= 0 and _is_real(a["t_formed"])
+                and 0 <= a["t_formed"] <= t and _is_real(a["x_over_d"]) and (held or failed))
 
 
 def check_continuable(header: dict, scene, path) -> None:
@@ -332,6 +362,9 @@ def _check_progress(host, sim, path) -> None:
                               f"= {t_end:.6g} s: --set run.t_end to {t:.6g} or later")
     # The neighbour capacities only grow by doubling from the first ones while a
     # rebuild overflows, and never past what N bodies can fill.
+    if any(i >= sim.N for arch in host["arches"] for i in arch["ids"]):
+        raise CheckpointError(f"{path}: host.arches: particle ids beyond the scene's {sim.N} "
+                              "bodies")
     caps = host["neighbor_caps"]
     if any(c > max(2 * sim.N, 16, *sim.neighbors.capacities) for c in caps):
         raise CheckpointError(f"{path}: host.neighbor_caps: {caps} exceed what "

@@ -9,6 +9,8 @@ functions here, which update its :class:`~taichi_hsdem.runstate.RunState`:
   docs/scene.md), or, with several throats, of the pore network (:func:`network_clog`);
 * every throat's passages and clog (:func:`observe_throats`, micromodels), and the
   network's injected bodies and clogged throats over time (:func:`network_rows`);
+* the arch census at the neck (:func:`census_arches`, with :class:`ArchCensus`):
+  when each arch formed, when and how it broke, or that it held;
 * feeding the inlet (:func:`feed`, ``feed.mode = "count"``);
 * the ``flow.csv`` rows of a pressure solve (:func:`flow_rows`);
 * and, at the end, the :class:`Result` with its summary (:func:`run_result`).
@@ -23,14 +25,16 @@ Examples
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from . import stats
 from .geometry.placement import find_free_spot
 from .geometry.throats import observe, throat_rows
-from .runstate import RunState
+from .runstate import ArchRecord, RunState
 from .scene import Scene
+from .studies import arches as arch_geometry
 from .version import __version__
 
 
@@ -45,6 +49,8 @@ class Result:
     throats: list = field(default_factory=list)
     # (realization, t, injected, throats clogged), with several throats
     network: list = field(default_factory=list)
+    # ArchRow per arch of the census, by realization and arch number
+    arches: list = field(default_factory=list)
     final: dict = field(default_factory=dict)       # numpy arrays (R, N, ...)
     notes: dict = field(default_factory=dict)       # what every "auto" chose, and why
 
@@ -189,6 +195,186 @@ def network_rows(rs: RunState, checked, escaped, alive) -> None:
             rs.network.append((int(r), rs.t, *now))
 
 
+# ------------------------------------------------------------------ arches
+#: The census looks for arches among the particles whose centre lies within this
+#: many bounding diameters of the neck along x: the arches that clog a
+#: constriction sit within about a diameter of it, and the search stays cheap.
+CENSUS_REACH = 3.0
+
+
+class ArchRow(NamedTuple):
+    """One arch of the census, as ``arches.csv`` writes it (:attr:`Result.arches`)."""
+    realization: int
+    arch: int
+    t_formed: float
+    t_broken: float | None       # None: held
+    held: bool
+    count: int
+    ids: tuple
+    x_over_d: float
+    failure: str                 # "held", "escaped", "rolled" or "slid"
+
+
+class ArchCensus:
+    """What the arch census (:func:`census_arches`) needs of a model, worked out
+    once. :meth:`of` gives None for a geometry the census cannot read: one with
+    obstacles (a micromodel's pillars) or without an open inlet and outlet.
+
+    Attributes
+    ----------
+    sides : Sides
+        The two side walls (:class:`~taichi_hsdem.studies.arches.Sides`).
+    shapes, species : list, (N,) array
+        The species' shapes and each body's species.
+    radius : (N,) array
+        Each body's radius, half its ``d_eq`` (the failure's lever arm).
+    d_b, d_min : float
+        The largest bounding diameter (touching: a gap of at most ``DEFAULT_TOL``
+        of it) and the smallest ``d_eq`` (the positions' unit).
+    neck_x : float
+        The neck's x, the middle of the constriction.
+    x_range : (float, float)
+        The particles searched: centres within :data:`CENSUS_REACH` of the neck.
+    watch : float
+        How long a broken arch is watched for an escape: ``clog.window``.
+    """
+
+    def __init__(self, model):
+        g = model.geometry
+        self.sides = arch_geometry.Sides(g)
+        self.shapes = [s.shape for s in model.species]
+        self.species = np.asarray(model.species_of_particle)
+        self.radius = 0.5 * np.array([model.species[k].d_eq for k in self.species])
+        self.d_b = 2.0 * max(s.bounding_radius for s in self.shapes)
+        self.d_min = model.d_min
+        self.neck_x = 0.5 * (g.constriction_x0 + g.constriction_x1)
+        self.x_range = (g.constriction_x0 - CENSUS_REACH * self.d_b,
+                        g.constriction_x1 + CENSUS_REACH * self.d_b)
+        self.watch = model.scene.clog.window
+
+    @classmethod
+    def of(cls, model):
+        """The census of ``model``, or None where its geometry has no two side walls."""
+        try:
+            return cls(model)
+        except arch_geometry.ArchError:
+            return None
+
+    def chain(self, x, theta, alive):
+        """The arch spanning the neck in one realization's state (x (N, 2), theta
+        (N,), alive (N,)): its particles from the lower side wall up, or None
+        (:func:`~taichi_hsdem.studies.arches.arch_chain`, touching: gap at most
+        ``DEFAULT_TOL`` bounding diameters; particles within :data:`CENSUS_REACH`
+        of the neck)."""
+        return arch_geometry.arch_chain(self.shapes, x, theta, alive, self.species, self.sides,
+                                        self.neck_x, self.d_b, x_range=self.x_range)
+
+    def x_over_d(self, x) -> float:
+        """Centres ``x`` (M, 2): their mean x less the neck's, over the smallest d_eq."""
+        return float((np.mean(x[:, 0]) - self.neck_x) / self.d_min)
+
+    def failure(self, arch: ArchRecord, x, theta) -> str:
+        """How ``arch``, whose members are alive, broke between the check that last
+        found it (its ``x``, ``theta``) and now (``x`` (N, 2), ``theta`` (N,)):
+        ``"rolled"`` when its members turned more than they slid, else ``"slid"``.
+
+        A heuristic, to first order in the motion. Turning: the sum over members
+        of ``|dtheta| r`` (``r`` half the member's d_eq). Sliding: the sum, over
+        the chain's contacts (lower wall - first member, each member - the next,
+        last member - upper wall), of the slip: the tangential part of the
+        relative displacement of the two bodies' material points at the contact,
+        a point's being ``dx + dtheta z x (p - centre)`` and a wall's nothing.
+        Two members touch at the point of their centre line ``r_i / (r_i + r_j)``
+        of the way from ``i``, a member and a wall at the wall point nearest its
+        centre. A member rolling on the others and the walls without slip has
+        turned ``|dtheta| r`` and slipped nothing; one sliding without turning
+        the reverse.
+        """
+        ids = list(arch.ids)
+        xa, ta = np.array(arch.x, dtype=float), np.array(arch.theta, dtype=float)
+        dx, dth, r = x[ids] - xa, theta[ids] - ta, self.radius[ids]
+        turn = float(np.sum(np.abs(dth) * r))
+
+        def perp(v):
+            return np.stack([-v[:, 1], v[:, 0]], axis=1)
+
+        def moved(k, p):         # the material points of members k at the points p
+            return dx[k] + dth[k][:, None] * perp(p - xa[k])
+
+        def along(u, normal):    # the sizes of u's parts across the contact normals
+            t = perp(normal)
+            return np.abs(np.sum(u * t, axis=1)) / np.hypot(t[:, 0], t[:, 1])
+
+        i, j = np.arange(len(ids) - 1), np.arange(1, len(ids))
+        p = xa[i] + (r[i] / (r[i] + r[j]))[:, None] * (xa[j] - xa[i])
+        ends = np.array([0, len(ids) - 1])
+        q = np.array([self.sides.nearest(xa[:1], 0)[0], self.sides.nearest(xa[-1:], 1)[0]])
+        slip = float(along(moved(i, p) - moved(j, p), xa[j] - xa[i]).sum()
+                     + along(moved(ends, q), q - xa[ends]).sum())
+        return "rolled" if turn > slip else "slid"
+
+
+def same_arch(before, now) -> bool:
+    """Whether the chain ``now`` is the arch whose members were ``before``: they
+    share more than half the particles of the larger of the two (the same set, or
+    one holding the other and most of its particles, or most kept and a few
+    swapped)."""
+    shared = len(set(before) & set(now))
+    return 2 * shared > max(len(before), len(now))
+
+
+def census_arches(rs: RunState, census: ArchCensus, st, r) -> None:
+    """The arch census of realization ``r`` at a check at ``rs.t``, into ``rs.arches``.
+
+    An arch is a chain of touching particles from one side wall to the other
+    across the neck (:meth:`ArchCensus.chain`). The chain found now continues
+    the realization's holding arch when :func:`same_arch` says so and no member
+    of it escaped; the arch's members and position are then updated to now.
+    Otherwise the holding arch broke now (``t_broken``): ``"escaped"`` when a
+    member passed the escape line since the check that last found it, else
+    ``"rolled"`` or ``"slid"`` by :meth:`ArchCensus.failure`, and a chain found
+    now is a new arch. A broken arch stays watched, and becomes ``"escaped"``
+    when one of its members passes the escape line, until the next arch forms or
+    for ``clog.window`` after it broke: a failed arch lets its particles through
+    over the checks that follow. ``st`` is the state before feeding, so a body
+    not alive passed the escape line since the last check.
+    """
+    x, theta, alive = st["x"][r], st["theta"][r], st["alive"][r]
+    chain = census.chain(x, theta, alive)
+    last = next((a for a in reversed(rs.arches) if a.realization == r), None)
+    if last is not None and last.t_broken is None:
+        escaped = not alive[last.ids].all()
+        if chain is not None and not escaped and same_arch(last.ids, chain):
+            last.ids, last.x, last.theta = chain, x[chain].tolist(), theta[chain].tolist()
+            last.x_over_d = census.x_over_d(x[chain])
+            return
+        last.t_broken = rs.t
+        last.failure = "escaped" if escaped else census.failure(last, x, theta)
+        last.watching = not escaped
+    elif last is not None and last.watching:
+        if rs.t - last.t_broken >= census.watch:
+            last.watching = False
+        elif not alive[last.ids].all():
+            last.failure, last.watching = "escaped", False
+    if chain is None:
+        return
+    if last is not None:
+        last.watching = False
+    rs.arches.append(ArchRecord(
+        realization=int(r), arch=0 if last is None else last.arch + 1, t_formed=rs.t,
+        ids=chain, x=x[chain].tolist(), theta=theta[chain].tolist(),
+        x_over_d=census.x_over_d(x[chain])))
+
+
+def arch_rows(rs: RunState) -> list:
+    """The census as :class:`ArchRow` s, by realization and arch number; an arch
+    holding now is ``held``."""
+    rows = [ArchRow(a.realization, a.arch, a.t_formed, a.t_broken, a.t_broken is None,
+                    len(a.ids), tuple(a.ids), a.x_over_d,
+                    "held" if a.t_broken is None else a.failure) for a in rs.arches]
+    return sorted(rows, key=lambda a: (a.realization, a.arch))
+
+
 # ------------------------------------------------------------------ feeding
 def feed(model, rngs, species, running, st) -> list:
     """Re-insert escaped particles at the inlet (``feed.mode = "count"``) of the
@@ -243,16 +429,20 @@ def flow_rows(fluid, flux_out, pressure, running, t) -> list:
 
 # ------------------------------------------------------------------ results
 def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
-               interrupted, fluid, neighbor_builds) -> Result:
+               interrupted, fluid, neighbor_builds, census) -> Result:
     """The run's results so far, from its state ``rs``, the escapees ``escaped``
     (R,), the state ``st`` and dead bodies per species ``dead`` now. Realizations
     still running are reported as stopped now (``t_stop``; ``"interrupted"`` when
-    the run was stopped early), without changing ``rs``, so that a later run goes
-    on. ``fluid``: the coupling's summary entry (None without fluid)."""
+    the run was stopped early), and their holding arches as held, without
+    changing ``rs``, so that a later run goes on. ``fluid``: the coupling's
+    summary entry (None without fluid); ``census``: the run's :class:`ArchCensus`
+    (None: it took none, and the arch counts are null)."""
     sc = model.scene
     esc = escaped
     series = list(rs.series)
     last_t = {r: t for r, t, _ in series}
+    arches = arch_rows(rs)
+    formed = np.bincount([a.realization for a in arches], minlength=len(rs.results))
     real = []
     for r, res in enumerate(rs.results):
         by_species = rs.escaped_by_species[r]
@@ -264,6 +454,8 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
         row = {"seed": res.seed, "escapees": res.escapees, "clogged": res.clogged,
                "t_clog": res.t_clog, "status": res.status, "reason": res.reason,
                "t_stop": res.t_stop,
+               "arches_formed": (None if census is None or res.status == "unstable"
+                                 else int(formed[r])),
                "escapees_by_species": (None if res.status == "unstable"
                                        else [int(v) for v in by_species]),
                # the check that saw the last escape counted (None: none)
@@ -280,6 +472,7 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
         real.append(row)
     counted = [r for r in real if r["status"] in ("ok", "interrupted")]
     n_unstable = sum(1 for r in real if r["status"] == "unstable")
+    held = sum(1 for a in arches if a.held and real[a.realization]["status"] != "unstable")
     statistics = (stats.summarize([r["escapees"] for r in counted],
                                   [bool(r["clogged"]) for r in counted],
                                   n_unstable=n_unstable) if counted else None)
@@ -295,6 +488,10 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
         "mean_escapees_ci": None if statistics is None else statistics["mean_escapees_ci"],
         "never_clogged": None if statistics is None else statistics["n_never_clogged"],
         "statistics": statistics,
+        # the arch census (arches.csv), over the realizations that did not go unstable
+        "arches_formed": (None if census is None else
+                          sum(r["arches_formed"] for r in real if r["arches_formed"] is not None)),
+        "arches_held": None if census is None else held,
         "fluid": fluid,
         "neighbor_builds": neighbor_builds,
         "history_overflows": rs.history_overflows,
@@ -309,7 +506,7 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
         summary["network"] = network_summary(rs, throats, real, escaped, st)
     return Result(scene=sc, summary=summary, series=series, flow=list(rs.flow),
                   throats=throat_rows(throats, rs.throat_passages, rs.throat_t_clog),
-                  network=list(rs.network), final=st, notes=dict(model.notes))
+                  network=list(rs.network), arches=arches, final=st, notes=dict(model.notes))
 
 
 def network_summary(rs: RunState, throats, real, escaped, st) -> dict:

@@ -1,5 +1,5 @@
-"""Writing a run's results: summary.json, escapees.csv, scene.resolved.toml, the
-checkpoint, the plots, video.mp4 and the ParaView series.
+"""Writing a run's results: summary.json, escapees.csv, arches.csv,
+scene.resolved.toml, the checkpoint, the plots, video.mp4 and the ParaView series.
 
 A run only ever replaces or removes files that runs of this project wrote in its
 folder (listed in :data:`MANIFEST`), and refuses a folder holding a file of a
@@ -119,10 +119,29 @@ def write_series(series, statuses, out: Path):
     atomic_write(out / "escapees.csv", buf.getvalue())
 
 
+def write_arches(rows, statuses, out: Path):
+    """``arches.csv``: realization,arch,t_formed,t_broken,held,count,ids,x_over_d,failure,
+    one row per arch of the census (:class:`~taichi_hsdem.observables.ArchRow`;
+    t_broken empty for an arch that held, ids separated by spaces); unstable
+    realizations are left out."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["realization", "arch", "t_formed", "t_broken", "held", "count", "ids",
+                "x_over_d", "failure"])
+    for a in rows:
+        if statuses[a.realization] != "unstable":
+            w.writerow([a.realization, a.arch, repr(float(a.t_formed)),
+                        "" if a.t_broken is None else repr(float(a.t_broken)),
+                        "true" if a.held else "false", a.count, " ".join(map(str, a.ids)),
+                        repr(float(a.x_over_d)), a.failure])
+    atomic_write(out / "arches.csv", buf.getvalue())
+
+
 #: Files (and folders) a run writes into its output folder.
-RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "flow.csv", "throats.csv", "network.csv",
-                "summary.json", "video.mp4", "escapees.png", "pmf.png", "permeability.png",
-                "throats_clogged.png", "clog_map.png", "series.pvd", "vtk", checkpoint.FILE)
+RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "arches.csv", "flow.csv", "throats.csv",
+                "network.csv", "summary.json", "video.mp4", "escapees.png", "pmf.png",
+                "permeability.png", "throats_clogged.png", "clog_map.png", "series.pvd", "vtk",
+                checkpoint.FILE)
 #: The plots a run may draw (report.py).
 PLOTS = ("escapees.png", "pmf.png", "permeability.png", "throats_clogged.png", "clog_map.png")
 #: The list of the files the runs of this project wrote in a folder: only these
@@ -255,17 +274,18 @@ class Staging:
         return self.tmp / name
 
     def publish(self, result, extra: list[str]) -> list[str]:
-        """Write the scene, the series and the summary beside the files ``extra``
-        already staged (the checkpoint among them when it waited here), then move
-        them all into the folder (summary last) and record them in the manifest;
-        returns the names written. A fresh run removes the files an earlier run
+        """Write the scene, the series, the arches and the summary beside the files
+        ``extra`` already staged (the checkpoint among them when it waited here),
+        then move them all into the folder (summary last) and record them in the
+        manifest; returns the names written. A fresh run removes the files an earlier run
         wrote and it does not; a continued run keeps the earlier part's files it
         does not replace. Nothing the runs of this project did not write is
         touched."""
         statuses = [r["status"] for r in result.summary["realizations"]]
         write_resolved_scene(result.scene, self.tmp, result.notes)
         write_series(result.series, statuses, self.tmp)
-        names = ["scene.resolved.toml", "escapees.csv", *extra]
+        write_arches(result.arches, statuses, self.tmp)
+        names = ["scene.resolved.toml", "escapees.csv", "arches.csv", *extra]
         if result.flow:
             write_flow(result.flow, statuses, self.tmp)
             names.insert(2, "flow.csv")

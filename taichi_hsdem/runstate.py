@@ -4,7 +4,8 @@
 on the host between steps beside the Taichi arrays: time and step count, the
 feeders' random-number generators, each realization's result so far, the
 observables' per-realization records (the last escape, the static arch, the
-escapes by species, every throat's passages and clog) and the time series.
+escapes by species, every throat's passages and clog), the arch census and the
+time series.
 The stepper advances ``t`` and ``steps``; the observables
 (:mod:`taichi_hsdem.observables`) update the rest at the checks;
 :mod:`taichi_hsdem.checkpoint` saves it with :meth:`RunState.to_arrays` and
@@ -40,6 +41,43 @@ class RealizationResult:
     t_stop: float | None = None
 
 
+@dataclass
+class ArchRecord:
+    """One arch of a realization's census
+    (:func:`~taichi_hsdem.observables.census_arches`): ``arches.csv``'s rows are
+    made from it.
+
+    Attributes
+    ----------
+    realization, arch : int
+        The realization, and the arch's number in it (from 0, in order of formation).
+    t_formed : float
+        The first check that found it.
+    ids : list of int
+        Its particles at the latest check that found it, from the lower side wall up.
+    x, theta : list
+        Their centres (``[x, y]`` each) and angles then: the failure's start.
+    x_over_d : float
+        Their centres' mean x then, less the neck's, over the smallest ``d_eq``.
+    t_broken : float or None
+        The first check that did not find it; None while it holds.
+    failure : str or None
+        ``"escaped"``, ``"rolled"`` or ``"slid"`` once broken.
+    watching : bool
+        Broken, and still watched: a member's escape would make it ``"escaped"``.
+    """
+    realization: int
+    arch: int
+    t_formed: float
+    ids: list
+    x: list
+    theta: list
+    x_over_d: float
+    t_broken: float | None = None
+    failure: str | None = None
+    watching: bool = False
+
+
 #: The fields of :class:`RunState` kept as numpy arrays (the others are plain
 #: values and lists, JSON in a checkpoint's header).
 ARRAY_FIELDS = ("last_escape_t", "escaped", "arch_static_t", "escaped_by_species",
@@ -67,6 +105,8 @@ class RunState:
         With several throats: ``(realization, t, injected, throats clogged)`` rows,
         at the first check and at every check that changed either (injected: the
         bodies placed or fed so far).
+    arches : list of ArchRecord
+        The arch census so far, every realization's arches in order of formation.
     any_running : bool
         Whether the last check left any realization running.
     history_overflows, launches : int
@@ -99,6 +139,7 @@ class RunState:
     series: list
     flow: list
     network: list
+    arches: list
     next_series: float
     any_running: bool
     history_overflows: int
@@ -125,7 +166,7 @@ class RunState:
             t=0.0, steps=0, seeds=[int(s) for s in seeds],
             rngs=[np.random.default_rng(s) for s in seeds],
             results=[RealizationResult(seed=int(s)) for s in seeds],
-            series=[], flow=[], network=[], next_series=0.0, any_running=True,
+            series=[], flow=[], network=[], arches=[], next_series=0.0, any_running=True,
             history_overflows=0, launches=0, e0=None, u_ref=None,
             last_escape_t=np.zeros(R), escaped=np.zeros(R, dtype=np.int64),
             arch_static_t=np.full(R, np.nan),
@@ -147,6 +188,7 @@ class RunState:
             "series": [[int(r), float(t), int(s)] for r, t, s in self.series],
             "flow": [[int(r), float(t), float(dp), float(q)] for r, t, dp, q in self.flow],
             "network": [[int(r), float(t), int(n), int(c)] for r, t, n, c in self.network],
+            "arches": [dict(vars(a)) for a in self.arches],
             "next_series": self.next_series, "any_running": self.any_running,
             "history_overflows": self.history_overflows, "launches": self.launches,
             "e0": None if self.e0 is None else [float(v) for v in self.e0],
@@ -171,6 +213,7 @@ class RunState:
             series=[(int(r), float(t), int(s)) for r, t, s in values["series"]],
             flow=[(int(r), float(t), float(dp), float(q)) for r, t, dp, q in values["flow"]],
             network=[(int(r), float(t), int(n), int(c)) for r, t, n, c in values["network"]],
+            arches=[ArchRecord(**saved) for saved in values["arches"]],
             next_series=float(values["next_series"]),
             any_running=bool(values["any_running"]),
             history_overflows=int(values["history_overflows"]),

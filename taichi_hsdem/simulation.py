@@ -75,6 +75,9 @@ class Simulation:
         the series): what a checkpoint saves beside the arrays.
     throats : Throats
         The geometry's throats (:func:`~taichi_hsdem.geometry.throats.throats_of`).
+    census : ArchCensus or None
+        The arch census the checks take (:class:`~taichi_hsdem.observables.ArchCensus`;
+        None for a geometry without two side walls).
     t, steps : float, int
         Simulated time and DEM steps so far (``run_state``'s).
     """
@@ -121,6 +124,7 @@ class Simulation:
         S = len(m.species)
         self._species_onehot = np.eye(S, dtype=np.int64)[self.particles.species_np]
         self.throats = throats_of(m.geometry)
+        self.census = observables.ArchCensus.of(m)
         self.run_state = RunState.start([self.scene.run.seed + k for k in range(R)], N, S,
                                         len(self.throats))
         self.interrupted = False    # whether the last run() was stopped early
@@ -374,11 +378,11 @@ class Simulation:
     def _check(self, final: bool = False):
         """Host-side checks every ``check_every`` steps; returns True while anything runs.
 
-        Stability here; escapes, clogs, throats and feeding by the observables
-        (:mod:`taichi_hsdem.observables`), into :attr:`run_state`. ``final``: the
-        last steps of a run that ends between two checks: only the stability
-        checks, reading without resetting, so that a later :meth:`run` (an
-        extension, or a resumed checkpoint) sees what a run never stopped sees.
+        Stability here; escapes, clogs, throats, the arch census and feeding by
+        the observables (:mod:`taichi_hsdem.observables`), into :attr:`run_state`.
+        ``final``: the last steps of a run that ends between two checks: only the
+        stability checks, reading without resetting, so that a later :meth:`run`
+        (an extension, or a resumed checkpoint) sees what a run never stopped sees.
         """
         m = self.model
         sc = self.scene
@@ -429,6 +433,8 @@ class Simulation:
                 continue
             if len(self.throats) and not final:
                 observables.observe_throats(rs, m, self.throats, st, r)
+            if self.census is not None and not final:
+                observables.census_arches(rs, self.census, st, r)
             if res.clogged or final:
                 continue            # stop_at_clog = false: the stream goes on, the result is kept
             if observables.count_escapes(rs, m, r, escaped, dead, st,
@@ -571,4 +577,4 @@ class Simulation:
             self._dead_by_species(st["alive"]), arch=self.arch, wall=wall,
             interrupted=self.interrupted,
             fluid=None if self.fluid is None else self.fluid.summary(),
-            neighbor_builds=builds)
+            neighbor_builds=builds, census=self.census)

@@ -1,19 +1,19 @@
-"""The arches that clog a figure's points: which particles span the neck, and how they touch.
+"""The arches that clog a constriction: which particles span the neck, and how they touch.
 
 A clogged realization ends with an arch: a chain of particles, each pressed on the
-next, from one side wall to the other across the constriction. ``tools/figures.py``
-keeps every realization's final state in its point files (``<out>/points/``); this
-module reads them back and, per clogged realization, finds the arch and sorts its
-contacts:
+next, from one side wall to the other across the constriction. The geometry here
+finds it in a state:
 
 * **the arch** is the shortest chain (fewest particles) of touching particles from
-  the lower side wall to the upper one (ties: the chain nearest the neck);
+  the lower side wall to the upper one (ties: the chain nearest the neck),
+  :func:`arch_chain`;
 * two outlines **touch** when their gap is at most ``tol`` times the bounding
   diameter ``d_b`` (a pressed contact has a small overlap, a negative gap); the gap
   is exact for outlines apart (the nearest points of two polygons are a vertex of
   one and an edge of the other, or a wall corner); for two convex outlines that
   overlap it is minus the penetration depth (the separating-axis test), for
-  others minus the deepest vertex's depth;
+  others minus the deepest vertex's depth; for two disks, and a disk and a wall,
+  it comes from the centres' distances, many at once;
 * a contact is **face-to-face** when an edge of one outline lies along an edge of
   the other (or along the wall): normals opposed within ``angle`` degrees and,
   over a common stretch of at least ``FACE_OVERLAP`` of the shorter edge, the one
@@ -21,9 +21,20 @@ contacts:
   ``FACE_OVERLAP`` of the shorter edge); otherwise it is a **vertex** contact (a
   corner on a face or on a corner). A circle's contacts are all ``curved``.
 
-Used as ``python tools/arches.py DIR`` on a finished ``tools/figures.py`` folder:
-``DIR/arches.csv`` (one row per clogged realization), ``DIR/arches.png`` (sample
-arches per point) and one summary line per point.
+Every run takes an arch census at its checks with :func:`arch_chain`
+(:func:`taichi_hsdem.observables.census_arches`: when each arch formed, when and how
+it broke, or that it held) and writes it to its folder's ``arches.csv``.
+
+``python -m taichi_hsdem arches DIR`` (or ``python tools/arches.py DIR``) reads
+
+* a **run folder** (``summary.json`` and ``arches.csv``): one line per
+  realization (the arches formed, how the broken ones failed, the one that held:
+  its particles and position) and a total line;
+* a finished ``tools/figures.py`` **figure folder** (``figure.json``; every
+  realization's final state kept in its point files, ``<out>/points/``): per
+  clogged realization it finds the arch of the final state and sorts its
+  contacts, and writes ``DIR/arches.csv`` (one row per clogged realization),
+  ``DIR/arches.png`` (sample arches per point) and one summary line per point.
 """
 from __future__ import annotations
 
@@ -123,6 +134,8 @@ class Sides:
                 side = 1
                 continue
             runs[side].append([v[k], w[k]])
+        if not runs[0] or not runs[1]:
+            raise ArchError("the arch analysis needs a channel with two side walls")
         self.geometry = geometry
         self.segments = [np.array(r, float).reshape(-1, 2, 2) for r in runs]
         self.normals = []
@@ -132,23 +145,48 @@ class Sides:
             self.normals.append(np.stack([-t[:, 1], t[:, 0]], axis=1)
                                 / np.hypot(t[:, 0], t[:, 1])[:, None])
 
-    def _point_gap(self, pts, k):
-        """Signed distance of points to side ``k`` (negative inside that wall)."""
+    def _point_gaps(self, pts) -> np.ndarray:
+        """Signed distances of points to the lower and the upper side, (2, M)
+        (negative inside that wall)."""
         pts = np.asarray(pts, float).reshape(-1, 2)
-        d = [point_segment_distance(pts[:, None, :], s[None, :, 0], s[None, :, 1]).min(axis=1)
-             for s in self.segments]
+        d = np.array([point_segment_distance(pts[:, None, :], s[None, :, 0],
+                                             s[None, :, 1]).min(axis=1)
+                      for s in self.segments])
         inside = wall_distance(self.geometry, pts) < 0
-        return np.where(inside & (d[k] <= d[1 - k]), -d[k], d[k])
+        return np.where(inside & np.array([d[0] <= d[1], d[1] <= d[0]]), -d, d)
 
     def gap(self, shape, x, theta, k) -> float:
         """Gap between a particle and side wall ``k`` (0 lower, 1 upper)."""
-        x = np.asarray(x, float)
-        if shape.kind == "circle":
-            return float(self._point_gap(x, k)[0] - shape.radius)
-        v = world_outline(shape, x, theta)
-        corners = self.segments[k].reshape(-1, 2)
-        return float(min(self._point_gap(v, k).min(),
-                         signed_distance(shape, to_body(corners, x, theta)).min()))
+        return float(self.gaps([shape], [x], [theta])[k, 0])
+
+    def gaps(self, shapes, x, theta) -> np.ndarray:
+        """Gaps between particles (``shapes[i]`` at ``x[i]``, ``theta[i]``) and the
+        lower and the upper side wall, (2, M): the disks' at once, from their
+        centres' distances."""
+        x = np.asarray(x, float).reshape(-1, 2)
+        out = np.empty((2, len(x)))
+        disk = np.array([s.kind == "circle" for s in shapes], dtype=bool)
+        if disk.any():
+            radius = np.array([s.radius for s, d in zip(shapes, disk) if d])
+            out[:, disk] = self._point_gaps(x[disk]) - radius
+        for i in np.flatnonzero(~disk):
+            v = world_outline(shapes[i], x[i], theta[i])
+            out[:, i] = self._point_gaps(v).min(axis=1)
+            for k in (0, 1):
+                corners = self.segments[k].reshape(-1, 2)
+                out[k, i] = min(out[k, i], signed_distance(shapes[i], to_body(
+                    corners, x[i], theta[i])).min())
+        return out
+
+    def nearest(self, points, k) -> np.ndarray:
+        """The points of side wall ``k`` nearest to ``points`` (M, 2)."""
+        p = np.asarray(points, float).reshape(-1, 1, 2)
+        a, b = self.segments[k][None, :, 0], self.segments[k][None, :, 1]
+        ab = b - a
+        t = np.clip(np.sum((p - a) * ab, axis=-1) / np.sum(ab * ab, axis=-1), 0.0, 1.0)
+        foot = a + t[..., None] * ab
+        best = np.argmin(np.hypot(*np.moveaxis(foot - p, -1, 0)), axis=1)
+        return foot[np.arange(len(p)), best]
 
 
 def _edges(v):
@@ -218,60 +256,94 @@ def wall_kind(sides, k, shape, x, theta, tol, angle=DEFAULT_ANGLE) -> str:
 # The arch of one final state
 # ----------------------------------------------------------------------------
 
-def find_arch(shapes, x, theta, alive, species, sides, neck_x, d_b, tol=DEFAULT_TOL,
-              angle=DEFAULT_ANGLE):
-    """The arch of one configuration, or None when no chain of touching particles
-    joins the two side walls.
+def arch_chain(shapes, x, theta, alive, species, sides, neck_x, d_b, tol=DEFAULT_TOL,
+               x_range=None):
+    """The particles of the arch of one configuration, from the lower side wall up,
+    or None when no chain of touching particles joins the two side walls.
 
-    Returns ``{"particles": [i, ...] from the lower wall up, "pairs": [kind of
-    each neighbouring pair], "walls": [kind on the lower wall, on the upper]}``.
+    The arch is the shortest chain (fewest particles; ties: the chain nearest
+    ``neck_x``) of particles each touching the next (gap at most ``tol d_b``,
+    :func:`pair_gap`), the first touching the lower side wall and the last the
+    upper one (:meth:`Sides.gaps`). Two disks' gap is their centres' distance
+    less their radii, all at once. ``x_range``: only the alive particles whose
+    centre x lies in ``(lo, hi)`` take part (None: every alive one).
     """
     x = np.asarray(x, float)
     theta = np.asarray(theta, float)
-    live = [i for i in range(len(x)) if alive[i]]
-    if not live:
+    take = np.asarray(alive, bool).copy()
+    if x_range is not None:
+        take &= (x[:, 0] > x_range[0]) & (x[:, 0] < x_range[1])
+    live = np.flatnonzero(take)
+    if not live.size:
         return None
     gap_d = tol * d_b
     reach = 2.0 * d_b          # two centres further apart than two bounding diameters cannot touch
-    sh = {i: shapes[int(species[i])] for i in live}
-    on_wall = {k: [i for i in live if sides.gap(sh[i], x[i], theta[i], k) <= gap_d] for k in (0, 1)}
-    if not on_wall[0] or not on_wall[1]:
+    xl, tl = x[live], theta[live]
+    sh = [shapes[int(species[i])] for i in live]
+    on_wall = [np.flatnonzero(g <= gap_d) for g in sides.gaps(sh, xl, tl)]
+    if not on_wall[0].size or not on_wall[1].size:
         return None
-    # Dijkstra over particles: one per particle, a little for distance from the neck
-    weight = {i: 1.0 + 1e-3 * abs(x[i, 0] - neck_x) / d_b for i in live}
+    disk = np.array([s.kind == "circle" for s in sh], dtype=bool)
+    radius = np.array([s.radius if d else np.nan for s, d in zip(sh, disk)])
+    # Dijkstra over the particles (indices into live): one per particle, a little
+    # for distance from the neck
+    weight = 1.0 + 1e-3 * np.abs(xl[:, 0] - neck_x) / d_b
     neigh = {}
 
-    def neighbours(i):
-        if i not in neigh:
-            near = [j for j in live if j != i and np.hypot(*(x[j] - x[i])) < reach]
-            neigh[i] = [j for j in near
-                        if pair_gap(sh[i], x[i], theta[i], sh[j], x[j], theta[j]) <= gap_d]
-        return neigh[i]
+    def neighbours(a):
+        if a not in neigh:
+            sep = np.hypot(*(xl - xl[a]).T)
+            near = np.flatnonzero(sep < reach)
+            near = near[near != a]
+            both = disk[near] & disk[a]
+            gap = np.where(both, sep[near] - radius[near] - radius[a], np.nan)
+            for k in np.flatnonzero(~both):
+                b = near[k]
+                gap[k] = pair_gap(sh[a], xl[a], tl[a], sh[b], xl[b], tl[b])
+            neigh[a] = near[gap <= gap_d].tolist()
+        return neigh[a]
 
-    dist = {i: weight[i] for i in on_wall[0]}
-    prev = {i: None for i in on_wall[0]}
-    heap = [(d, i) for i, d in dist.items()]
+    dist = {int(a): weight[a] for a in on_wall[0]}
+    prev = {a: None for a in dist}
+    heap = [(d, a) for a, d in dist.items()]
     heapq.heapify(heap)
-    top = set(on_wall[1])
+    top = set(on_wall[1].tolist())
     end = None
     while heap:
-        d, i = heapq.heappop(heap)
-        if d > dist[i]:
+        d, a = heapq.heappop(heap)
+        if d > dist[a]:
             continue
-        if i in top:
-            end = i
+        if a in top:
+            end = a
             break
-        for j in neighbours(i):
-            nd = d + weight[j]
-            if nd < dist.get(j, math.inf):
-                dist[j], prev[j] = nd, i
-                heapq.heappush(heap, (nd, j))
+        for b in neighbours(a):
+            nd = d + weight[b]
+            if nd < dist.get(b, math.inf):
+                dist[b], prev[b] = nd, a
+                heapq.heappush(heap, (nd, b))
     if end is None:
         return None
     chain = [end]
     while prev[chain[-1]] is not None:
         chain.append(prev[chain[-1]])
-    chain.reverse()
+    return [int(live[a]) for a in reversed(chain)]
+
+
+def find_arch(shapes, x, theta, alive, species, sides, neck_x, d_b, tol=DEFAULT_TOL,
+              angle=DEFAULT_ANGLE):
+    """The arch of one configuration (:func:`arch_chain`, every alive particle), or
+    None when no chain of touching particles joins the two side walls.
+
+    Returns ``{"particles": [i, ...] from the lower wall up, "pairs": [kind of
+    each neighbouring pair], "walls": [kind on the lower wall, on the upper]}``.
+    """
+    chain = arch_chain(shapes, x, theta, alive, species, sides, neck_x, d_b, tol)
+    if chain is None:
+        return None
+    x = np.asarray(x, float)
+    theta = np.asarray(theta, float)
+    gap_d = tol * d_b
+    sh = {i: shapes[int(species[i])] for i in chain}
     pairs = [pair_kind(sh[i], x[i], theta[i], sh[j], x[j], theta[j], gap_d, angle)
              for i, j in zip(chain, chain[1:])]
     walls = [wall_kind(sides, 0, sh[chain[0]], x[chain[0]], theta[chain[0]], gap_d, angle),
@@ -420,15 +492,92 @@ def draw(result, path, examples=6, tol=DEFAULT_TOL):
     plt.close(fig)
 
 
+# ----------------------------------------------------------------------------
+# A run folder
+# ----------------------------------------------------------------------------
+
+#: arches.csv's columns in a run folder (output.write_arches).
+RUN_COLUMNS = ["realization", "arch", "t_formed", "t_broken", "held", "count", "ids",
+               "x_over_d", "failure"]
+
+
+def read_run(folder: Path):
+    """``(summary, arches)`` of a run folder: its summary.json, and its arches.csv
+    as one list of row dicts (text values) per realization."""
+    try:
+        summary = json.loads((folder / "summary.json").read_text())
+        n = len(summary["realizations"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ArchError(f"{folder}/summary.json: not a run's summary ({exc})") from None
+    path = folder / "arches.csv"
+    if not path.is_file():
+        raise ArchError(f"{path}: missing: the run was made before runs took an arch census; "
+                        "run the scene again")
+    arches = [[] for _ in range(n)]
+    try:
+        with open(path, newline="") as fh:
+            reader = csv.DictReader(fh)
+            if reader.fieldnames != RUN_COLUMNS:
+                raise ValueError(f"columns {reader.fieldnames}, not {RUN_COLUMNS}")
+            for row in reader:
+                arches[int(row["realization"])].append(row)
+    except (OSError, ValueError, IndexError) as exc:
+        raise ArchError(f"{path}: not a run's arches.csv ({exc})") from None
+    return summary, arches
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}" if n == 1 else f"{n} {word}es"
+
+
+def _failures(rows) -> str:
+    """How the broken arches of ``rows`` failed: ``2 escaped, 1 slid``."""
+    counts = Counter(r["failure"] for r in rows if r["held"] != "true")
+    return ", ".join(f"{counts[k]} {k}" for k in ("escaped", "rolled", "slid") if counts[k])
+
+
+def run_lines(summary, arches) -> list[str]:
+    """One line per realization of a run folder (:func:`read_run`): the arches
+    formed, how the broken ones failed, the one that held (its particles from the
+    lower wall up and its position: x of their mean less the neck's, over the
+    smallest d_eq); and a total line."""
+    lines = []
+    for k, (real, rows) in enumerate(zip(summary["realizations"], arches)):
+        head = f"realization {k} (seed {real['seed']}): "
+        if real["status"] == "unstable":
+            lines.append(head + "went unstable, no arches counted")
+            continue
+        parts = [_plural(len(rows), "arch") + " formed"]
+        if _failures(rows):
+            parts.append(f"broken: {_failures(rows)}")
+        held = [r for r in rows if r["held"] == "true"]
+        parts += [f"held: particles {r['ids']} at x = {float(r['x_over_d']):+.2f} d from "
+                  f"the neck, formed at t = {float(r['t_formed']):.4g}" for r in held] or [
+            "none held"]
+        lines.append(head + "; ".join(parts))
+    counted = [rows for real, rows in zip(summary["realizations"], arches)
+               if real["status"] != "unstable"]
+    every = [r for rows in counted for r in rows]
+    held = sum(r["held"] == "true" for r in every)
+    total = (f"total: {_plural(len(every), 'arch')} formed in {len(counted)} realizations, "
+             f"{held} held")
+    if _failures(every):
+        total += f"; broken: {_failures(every)}"
+    return lines + [total]
+
+
 def _parser(prog: str) -> Parser:
-    p = Parser(prog=prog, description="The clogging arches of a finished figures folder.")
-    p.add_argument("folder", help="the figure's --out folder")
-    p.add_argument("--tol", type=float, default=DEFAULT_TOL,
-                   help=f"touching: gap at most this times d_b (default {DEFAULT_TOL})")
-    p.add_argument("--angle", type=float, default=DEFAULT_ANGLE,
-                   help=f"face-to-face: normals opposed within this many degrees "
-                        f"(default {DEFAULT_ANGLE:g})")
-    p.add_argument("--examples", type=int, default=6, help="arches drawn per point (default 6)")
+    p = Parser(prog=prog, description="The arches of a run folder (its arch census), or the "
+                                      "clogging arches of a finished figures folder.")
+    p.add_argument("folder", help="a run's output folder, or a figure's --out folder")
+    p.add_argument("--tol", type=float, default=None,
+                   help=f"figure folders: touching: gap at most this times d_b (default "
+                        f"{DEFAULT_TOL})")
+    p.add_argument("--angle", type=float, default=None,
+                   help=f"figure folders: face-to-face: normals opposed within this many "
+                        f"degrees (default {DEFAULT_ANGLE:g})")
+    p.add_argument("--examples", type=int, default=None,
+                   help="figure folders: arches drawn per point (default 6)")
     return p
 
 
@@ -438,19 +587,43 @@ def main(argv=None, prog: str = "python -m taichi_hsdem arches") -> int:
         args = _parser(prog).parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
+    folder = Path(args.folder)
+    options = [f"--{k}" for k in ("tol", "angle", "examples") if getattr(args, k) is not None]
+    if not (folder / "figure.json").exists():
+        if not (folder / "summary.json").exists():
+            print(f"{folder}: neither a run folder (no summary.json) nor a figure folder "
+                  f"(no readable figure.json)", file=sys.stderr)
+            return 2
+        if options:
+            print(f"{', '.join(options)}: for figure folders; a run's arch census was taken "
+                  f"during the run (touching: gap <= {DEFAULT_TOL:g} d_b)", file=sys.stderr)
+            return 2
+        try:
+            summary, arches = read_run(folder)
+        except ArchError as exc:
+            print(str(exc), file=sys.stderr)
+            return 2
+        if summary.get("arches_formed") is None:
+            print(f"{folder}: the run took no arch census: its geometry is not a channel with "
+                  "two side walls and no obstacles")
+            return 0
+        print("\n".join(run_lines(summary, arches)))
+        return 0
+    tol = DEFAULT_TOL if args.tol is None else args.tol
+    angle = DEFAULT_ANGLE if args.angle is None else args.angle
+    examples = 6 if args.examples is None else args.examples
     problems = []
-    if not (0 < args.tol < 1):
-        problems.append(f"--tol must be in (0, 1), got {args.tol:g}")
-    if not (0 < args.angle < 90):
-        problems.append(f"--angle must be in (0, 90) degrees, got {args.angle:g}")
-    if args.examples < 1:
-        problems.append(f"--examples must be >= 1, got {args.examples}")
+    if not (0 < tol < 1):
+        problems.append(f"--tol must be in (0, 1), got {tol:g}")
+    if not (0 < angle < 90):
+        problems.append(f"--angle must be in (0, 90) degrees, got {angle:g}")
+    if examples < 1:
+        problems.append(f"--examples must be >= 1, got {examples}")
     if problems:
         print("\n".join(problems), file=sys.stderr)
         return 2
-    folder = Path(args.folder)
     try:
-        result = analyse_folder(folder, args.tol, args.angle)
+        result = analyse_folder(folder, tol, angle)
     except ArchError as exc:
         print(str(exc), file=sys.stderr)
         return 2
@@ -462,6 +635,6 @@ def main(argv=None, prog: str = "python -m taichi_hsdem arches") -> int:
                 w.writerow([r.get(k, "") for k in COLUMNS])
     for label, rows, _, _ in result:
         print(summary_line(label, rows))
-    draw(result, folder / "arches.png", args.examples, args.tol)
+    draw(result, folder / "arches.png", examples, tol)
     print(f"wrote {folder}/arches.csv, arches.png")
     return 0
