@@ -92,7 +92,7 @@ DISKS = ["feed.region=[0.0024, 0.0031]", "clog.window=0.1"]
 PENTAGONS = ["feed.region=[0.0026, 0.0033]", "particles.count=10", "clog.window=0.04",
              "run.t_end=0.15"]
 STREAMS = {  # scene, overrides, whether a realization clogs, realizations run alone
-    "disks-flow_rate": (VANI, DISKS + ["run.t_end=0.4"], True, (0, 1)),
+    "disks-flow_rate": (VANI, DISKS + ["run.t_end=0.6"], True, (0, 1)),
     "disks-pressure": (VANI, DISKS + ["run.t_end=0.7"] + PRESSURE, True, (0, 1)),
     "pentagons-flow_rate": (POLYGONS, PENTAGONS, False, (0,)),
     "pentagons-pressure": (POLYGONS, PENTAGONS + PRESSURE, False, (0,)),

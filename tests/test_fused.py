@@ -105,8 +105,8 @@ def test_device_rebuilds_give_the_host_rebuilds_bits(per_step, shrink):
 
 
 def test_a_device_rebuild_that_overflows_mid_chunk_catches_up():
-    """1500 steps in one call, capacities of one: on the device the lists
-    overflow at step 653 (of 1500), the batch stalls for the remaining 847
+    """1501 steps in one call, capacities of one: on the device the lists
+    overflow at step 696 (of 1501), the batch stalls for the remaining 805
     steps of the call (an odd number: the shear history's buffers must be put
     back in order), the host grows the lists and runs them; the bits are those
     of the host's rebuilds after every step."""
@@ -121,12 +121,12 @@ def test_a_device_rebuild_that_overflows_mid_chunk_catches_up():
             taken.append(chunk(n))
             return taken[-1]
         sim._steps_per_body = counted
-        sim.advance(1500)
+        sim.advance(1501)
         states[device] = sim.state()
         if device:
-            assert sim.stalled_rebuilds == 1 and taken[0] < 1500 and (1500 - taken[0]) % 2
+            assert sim.stalled_rebuilds == 1 and taken[0] < 1501 and (1501 - taken[0]) % 2
         else:
-            assert taken == [1500]
+            assert taken == [1501]
     for key in ("x", "v", "theta", "omega", "alive"):
         np.testing.assert_array_equal(states[True][key], states[False][key], err_msg=key)
 
