@@ -68,11 +68,11 @@ def _plate_run(load_ratio, density=1.0, xi=2.0, seconds=20.0):
 def test_plate_friction_holds_a_particle_below_the_coulomb_limit():
     # below the limit the friction is a drag of rate limit / (m creep): the
     # particle creeps at v = (F/m) / (xi + limit / (m creep)), below the creep
-    # speed 1e-3 d xi (the steady state of the step, exact)
+    # speed 1e-6 d xi (the steady state of the step, exact)
     sim, limit = _plate_run(0.5)
     sp = sim.model.species[0]
     assert sp.plate * sp.mass == pytest.approx(limit, rel=1e-12)
-    assert sp.creep == pytest.approx(1e-3 * 1.0 * 2.0, rel=1e-12)
+    assert sp.creep == pytest.approx(1e-6 * 1.0 * 2.0, rel=1e-12)
     v = sim.state()["v"][0, 0]
     expect = (0.5 * limit / sp.mass) / (sp.xi + sp.plate / sp.creep)
     assert v[0] == pytest.approx(expect, rel=1e-9)

@@ -198,10 +198,10 @@ def body_drift(bodies: state.Bodies.Pack, running: ti.types.ndarray(), particles
                          ti.cast(bodies.omega[r, i], REAL.dtype)], dt=REAL.dtype)
         play = running[r] != 0 and bodies.alive[r, i] != 0
         if play:
+            k_spin = xi[particles.species[i]] + particles.spin[i]
             kv = ti.cast(xi[particles.species[i]], REAL.dtype) + ti.cast(
                 plate_rate(particles, i, bodies.v[r, i]), REAL.dtype)
-            k = ti.Vector([kv, kv, ti.cast(xi[particles.species[i]] + particles.spin[i], REAL.dtype)],
-                          dt=REAL.dtype)
+            k = ti.Vector([kv, kv, ti.cast(k_spin, REAL.dtype)], dt=REAL.dtype)
             inert = ti.Vector([ti.cast(particles.mass[i], REAL.dtype),
                                ti.cast(particles.mass[i], REAL.dtype),
                                ti.cast(particles.inertia[i], REAL.dtype)], dt=REAL.dtype)

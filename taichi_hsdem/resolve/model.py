@@ -48,10 +48,12 @@ UPDATE_CELL_FRACTION = 1.0    # fluid cells a particle may cross between auto-in
                               # give fewer escapees; README, Accuracy)
 MAX_TRAVEL_BETWEEN_SOLVES = 0.5  # diameters a particle may move between solves, at most
 # Plate friction is regularised below the creep speed PLATE_CREEP * d_eq * xi (a
-# thousandth of a diameter per damping time): a particle held below the Coulomb
-# limit creeps at most that fast, 1e-3 d per second at xi = 1000/s, against the
-# millimetres per second of the flow; the drag that regularises it is implicit.
-PLATE_CREEP = 1.0e-3
+# millionth of a diameter per damping time): a particle held below the Coulomb
+# limit creeps at most that fast, 6.5e-4 d/s in the vani scene (xi = 650/s), 0.002 d
+# over a 3 s run, against the flow's few d/s; the drag that regularises it,
+# limit / creep (1e6 xi times the limit over the load of a free particle), is
+# implicit, so its stiffness costs no stability.
+PLATE_CREEP = 1.0e-6
 # Taichi backends on which "auto" stepping stays per-step (one realization per thread
 # would leave a GPU idle).
 GPU_ARCHS = ("cuda", "vulkan", "metal", "opengl", "dx11", "dx12", "amdgpu", "gles")

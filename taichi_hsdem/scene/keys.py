@@ -379,7 +379,7 @@ class SpeciesConfig(Config):
            "dimensionless; 0: no plate contact. A particle denser (lighter) than the fluid "
            "settles on the lower (upper) plate and meets a friction force of at most this "
            "times its buoyant weight, |rho_p - rho_f| g pi d_eq^3 / 6, against its sliding "
-           "(regularised: below the limit it creeps at 1e-3 d_eq xi times the load over the "
+           "(regularised: below the limit it creeps at 1e-6 d_eq xi times the load over the "
            "limit)", 0.0, ge=0)
 
     def area(self) -> float:
