@@ -111,7 +111,9 @@ def count_escapes(rs: RunState, model, r, escaped, dead, st, throats=None) -> bo
     outlet for clog.window (a throat's clog needs no passage for clog.window, not
     that long at rest: a throat that particles seldom reach would otherwise close a
     cut the moment one of them paused in it); otherwise when the arch at the
-    constriction holds (:func:`arch_static`)."""
+    constriction holds (:func:`arch_static`) with no escape for clog.window: from
+    the last escape, or, before any escape, from when the arch formed (``t_clog``,
+    the first check that found it static after the last escape)."""
     res = rs.results[r]
     went = escaped[r] > rs.escaped[r]
     if went:
@@ -132,8 +134,12 @@ def count_escapes(rs: RunState, model, r, escaped, dead, st, throats=None) -> bo
         # a clog: no escape for clog.window and the arch static now. It formed
         # when the checks first found it static after the last escape (the speed
         # at the neck flickers about the threshold once it holds, so the latest
-        # static stretch would start late)
-        if not (static and rs.t - rs.last_escape_t[r] >= sc.clog.window):
+        # static stretch would start late). Before any escape the window counts
+        # from when the arch formed: t = 0 is no event (rs.last_escape_t starts
+        # at 0), and counting from it clogged a realization at the first static
+        # check past clog.window, t_clog = t_stop, an arch held for no time
+        since = rs.last_escape_t[r] if rs.escaped[r] > 0 else rs.arch_static_t[r]
+        if not (static and rs.t - since >= sc.clog.window):
             return False
         t_clog = float(rs.arch_static_t[r])
     res.clogged = True
