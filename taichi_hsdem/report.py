@@ -11,8 +11,8 @@
 * ``pmf.png`` (at least :data:`taichi_hsdem.stats.MIN_CLOGS` clogged
   realizations; fewer cannot show a shape, and the summary says why it is
   missing): the PMF of ``s / <s>`` on a log scale with ``exp(-x)``, the
-  geometric law's, and the p-value of the test of a constant clogging
-  probability (:func:`taichi_hsdem.stats.geometric_fit_test`).
+  geometric law's, titled with the clog probability per escapee and the
+  goodness-of-fit p-value of the geometric law (:func:`pmf_title`).
 
 With several throats (a micromodel, :func:`plot_network`):
 
@@ -152,9 +152,7 @@ def plot_run(result, folder: Path, law=None) -> dict:
             ax.set_yscale("log")
             ax.set_xlabel("x = s / <s>")
             ax.set_ylabel("PMF (density in x, over all realizations)")
-            p = test.p_value
-            ax.set_title("PMF of s/<s>; constant clogging probability: "
-                         + (f"p = {p:.3g}" if p is not None else "not tested"))
+            ax.set_title(pmf_title(s, c, test), fontsize=10)
             ax.legend(fontsize=8)
             fig.tight_layout()
             fig.savefig(folder / "pmf.png", dpi=110)
@@ -163,6 +161,25 @@ def plot_run(result, folder: Path, law=None) -> dict:
         else:
             drawn["pmf_skipped"] = "every clogged realization had s = 0: s/<s> is undefined"
     return drawn
+
+
+def pmf_title(escapees, clogged, test=None) -> str:
+    """The title of ``pmf.png``: the clog probability per escapee ``p`` (the
+    censoring-aware estimate, :func:`taichi_hsdem.stats.clog_probability_per_escapee`,
+    with its 95 % interval) and, beside it, the p-value of the goodness-of-fit test
+    of the geometric law (:func:`taichi_hsdem.stats.geometric_fit_test`), named as a
+    p-value: it is no probability of clogging.
+
+    Examples
+    --------
+    >>> pmf_title([4, 1, 0, 5, 2, 7, 1, 0, 3, 9], [True] * 10)
+    'PMF of s/<s>\\nclog probability per escapee 0.24 [0.13, 0.38]; geometric law: GOF p-value 0.512'
+    """
+    p, (lo, hi) = stats.clog_probability_per_escapee(escapees, clogged)
+    test = stats.geometric_fit_test(escapees, clogged) if test is None else test
+    gof = ("not tested" if test.p_value is None else f"{test.p_value:.3g}")
+    return (f"PMF of s/<s>\nclog probability per escapee {p:.2g} [{lo:.2g}, {hi:.2g}]; "
+            f"geometric law: GOF p-value {gof}")
 
 
 def steady_stream_law(sim) -> tuple[float, float, float, float] | None:

@@ -79,3 +79,18 @@ def test_pmf_figure_needs_min_clogs(tmp_path, clogs):
     else:
         assert drawn["pmf"] == "pmf.png" and (tmp_path / "pmf.png").is_file()
         assert "pmf_skipped" not in drawn
+
+
+def test_pmf_title_says_the_gof_p_value_and_the_clog_probability_per_escapee():
+    """pmf.png's title names the test's p-value as a GOF p-value, beside the
+    estimated clog probability per escapee (issue 46: "constant clogging
+    probability: p = 0.522" read as a probability, where p was 0.123)."""
+    s, c = [4, 1, 0, 5, 2, 7, 1, 0, 3, 9], [True] * 10
+    title = report.pmf_title(s, c)
+    p, (lo, hi) = stats.clog_probability_per_escapee(s, c)
+    gof = stats.geometric_fit_test(s, c).p_value
+    assert f"clog probability per escapee {p:.2g} [{lo:.2g}, {hi:.2g}]" in title
+    assert f"GOF p-value {gof:.3g}" in title
+    assert "constant clogging probability" not in title
+    few = report.pmf_title([3, 5], [True, True])
+    assert "GOF p-value not tested" in few
