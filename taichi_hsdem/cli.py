@@ -4,8 +4,9 @@
 Exit status: 0 success; 2 the scene, the arguments or the output folder are
 invalid (one line per problem, no traceback, nothing written); 1 the run failed
 (numerical instability, a fluid solve that did not balance, results that could
-not be written), with what to change; 130 interrupted (Ctrl-C, at any moment),
-with one line saying what was kept.
+not be written), with what to change; 130 interrupted (Ctrl-C), 143 stopped by
+SIGTERM (``kill``, ``timeout``, Slurm), 129 by SIGHUP (the terminal closed), at any
+moment, with one line saying what was kept.
 
 The output folder's rules (:mod:`taichi_hsdem.output`): files of the user's are
 never replaced or removed, a folder never mixes two runs, and a failed run leaves
@@ -91,37 +92,78 @@ class _Progress:
 
 
 class _Interrupt:
-    """Ctrl-C (SIGINT), handled from the first line of :func:`main` to its last.
+    """Ctrl-C (SIGINT), ``kill``'s and Slurm's SIGTERM and a closed terminal's SIGHUP,
+    handled alike from the first line of :func:`main` to its last.
 
     During set-up it stops at once (nothing has been written yet); during the run
     the first asks the run to stop at the next chunk of steps (results and a
     checkpoint are kept) and a second stops at once; while the results are being
     written it waits until they all are, so that a folder never holds part of a
-    run's files. The handler is installed explicitly, so that a run started with
-    SIGINT ignored (a background job of a script) still obeys it."""
+    run's files. The exit status is 128 + the first signal's number (130, 143,
+    129). The handlers are installed explicitly, so that a run started with SIGINT
+    ignored (a background job of a script) still obeys Ctrl-C; SIGHUP ignored (a
+    run under ``nohup``) stays ignored. Run as the program (``keep``), the handlers
+    stay after :func:`main` returns: a signal while the process winds down (Taichi's
+    clean-up) says the outcome was already reached and exits at once."""
 
-    SETUP, RUN, WRITE = "set-up", "run", "write"
+    SETUP, RUN, WRITE, DONE = "set-up", "run", "write", "done"
+    SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 
-    def __init__(self):
+    def __init__(self, keep: bool = False):
         self.requested = False
+        self.signum = None
         self.phase = self.SETUP
-        self.previous = None
+        self.previous = {}
+        self.keep = keep
+        self.out = None             # the output folder, once known
+        self.outcome = None         # main's exit status, once reached (DONE)
+
+    @property
+    def code(self) -> int:
+        """The exit status of a stop by the first signal received."""
+        return 128 + int(self.signum or signal.SIGINT)
+
+    @property
+    def what(self) -> str:
+        """How the stop reads in a message: "interrupted" (Ctrl-C) or "stopped by
+        SIGTERM"."""
+        if self.signum in (None, signal.SIGINT):
+            return "interrupted"
+        return f"stopped by {signal.Signals(self.signum).name}"
 
     def _handler(self, signum, frame):
+        if self.signum is None:
+            self.signum = signum
+        if self.phase == self.DONE:         # main has returned: the process winds down
+            if self.outcome == EXIT_OK:
+                print(f"{self.what} after the run had ended: its results in {self.out} "
+                      "are complete", file=sys.stderr, flush=True)
+                os._exit(self.code)
+            os._exit(self.outcome if self.outcome is not None else self.code)
         if self.phase == self.SETUP or (self.phase == self.RUN and self.requested):
             raise KeyboardInterrupt
         self.requested = True
 
     def __enter__(self):
-        try:
-            self.previous = signal.signal(signal.SIGINT, self._handler)
-        except ValueError:          # not the main thread: Ctrl-C stays as it is
-            self.previous = None
+        for name in self.SIGNALS:
+            sig = getattr(signal, name, None)
+            if sig is None:                  # SIGHUP: not on Windows
+                continue
+            try:
+                if sig != signal.SIGINT and signal.getsignal(sig) == signal.SIG_IGN:
+                    continue                 # nohup: SIGHUP is meant to be ignored
+                self.previous[sig] = signal.signal(sig, self._handler)
+            except ValueError:           # not the main thread: signals stay as they are
+                break
         return self
 
     def __exit__(self, *exc):
-        if self.previous is not None:
-            signal.signal(signal.SIGINT, self.previous)
+        if self.keep and exc[0] is None:
+            self.phase = self.DONE
+            return
+        for sig, previous in self.previous.items():
+            signal.signal(sig, previous if previous is not None else signal.SIG_DFL)
+        self.previous = {}
 
     def __call__(self) -> bool:
         return self.requested
@@ -249,34 +291,49 @@ def _command(argv) -> int | None:
 def main(argv=None) -> int:
     """``python -m taichi_hsdem [run] SCENE.toml ...`` or ``python -m taichi_hsdem
     sweep|calibrate|figures|arches ...``; the exit status."""
+    explicit = argv is not None
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["run"] and not os.path.exists("run"):
         argv = argv[1:]
     code = _command(argv)
     if code is not None:
         return code
-    with _Interrupt() as interrupt:
-        try:
-            args = _parser().parse_args(argv)
-        except SystemExit as exc:          # --help (0) or a bad argument (2)
-            return exc.code
-        try:
-            return _main(args, interrupt)
-        except KeyboardInterrupt:
-            print("interrupted during set-up: nothing was written", file=sys.stderr)
-            return EXIT_INTERRUPTED
-        except MemoryError:
-            print("out of memory: the scene needs more memory than this machine gave; "
-                  "use fewer realizations, particles, nodes or a coarser fluid.cell_size",
-                  file=sys.stderr)
-            return EXIT_FAILED
-        except Exception as exc:         # a defect of ours: one line, not a traceback
-            if os.environ.get("TAICHI_HSDEM_DEBUG"):
-                raise
-            print(f"internal error ({type(exc).__name__}: {exc}); this is a bug of "
-                  "taichi_hsdem: please report it with the command (set "
-                  "TAICHI_HSDEM_DEBUG=1 for the traceback)", file=sys.stderr)
-            return EXIT_FAILED
+    # Called with no arguments, main is the program (python -m taichi_hsdem): the
+    # signal handlers stay while the process winds down.
+    with _Interrupt(keep=not explicit) as interrupt:
+        code = _guarded(argv, interrupt)
+        if code == EXIT_OK and interrupt.requested:
+            # a signal after the last check of the run, when all was written
+            print(f"{interrupt.what} after the run had ended: its results in "
+                  f"{interrupt.out} are complete", file=sys.stderr)
+            code = interrupt.code
+        interrupt.outcome = code
+        return code
+
+
+def _guarded(argv, interrupt) -> int:
+    """:func:`_main` with every way out turned into an exit status and one line."""
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:          # --help (0) or a bad argument (2)
+        return exc.code
+    try:
+        return _main(args, interrupt)
+    except KeyboardInterrupt:
+        print(f"{interrupt.what} during set-up: nothing was written", file=sys.stderr)
+        return interrupt.code
+    except MemoryError:
+        print("out of memory: the scene needs more memory than this machine gave; "
+              "use fewer realizations, particles, nodes or a coarser fluid.cell_size",
+              file=sys.stderr)
+        return EXIT_FAILED
+    except Exception as exc:         # a defect of ours: one line, not a traceback
+        if os.environ.get("TAICHI_HSDEM_DEBUG"):
+            raise
+        print(f"internal error ({type(exc).__name__}: {exc}); this is a bug of "
+              "taichi_hsdem: please report it with the command (set "
+              "TAICHI_HSDEM_DEBUG=1 for the traceback)", file=sys.stderr)
+        return EXIT_FAILED
 
 
 def _main(args, interrupt) -> int:
@@ -294,6 +351,7 @@ def _main(args, interrupt) -> int:
                                       f"{scene.source}: output.dir")
     resume_dir = None if resume_from is None else resume_from.parent
     continuing = resume_dir is not None and _same_folder(out, resume_dir)
+    interrupt.out = out
     problem = output_folder_problem(out, where)
     if problem:
         print(problem, file=sys.stderr)
@@ -305,7 +363,7 @@ def _main(args, interrupt) -> int:
         print(f"{where}: {exc}: wait for it to end, or choose another folder",
               file=sys.stderr)
         return EXIT_INVALID
-    if (code in (EXIT_OK, EXIT_INTERRUPTED) and resume_dir is not None and not continuing
+    if (code in (EXIT_OK, interrupt.code) and resume_dir is not None and not continuing
             and resume_dir.resolve().name.startswith(output.STAGING_PREFIX)):
         # the staging folder of a run killed hard, now published: it is done
         shutil.rmtree(resume_dir, ignore_errors=True)
@@ -365,13 +423,13 @@ def _run(args, scene, resume_from, staged, interrupt) -> int:
               "results were not written, the folder's earlier ones are as they were",
               file=sys.stderr)
         return EXIT_FAILED
-    except KeyboardInterrupt:   # a second Ctrl-C: stop now, keep nothing new
+    except KeyboardInterrupt:   # a second signal: stop now, keep nothing new
         interrupt.phase = interrupt.WRITE
         progress.close()
         pictures.discard()
-        print("interrupted twice: stopped at once; the output folder's results are as "
-              "they were", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        print(f"{interrupt.what} twice: stopped at once; the output folder's results are "
+              "as they were", file=sys.stderr)
+        return interrupt.code
     interrupt.phase = interrupt.WRITE
     progress.close()
     s = result.summary
@@ -401,14 +459,14 @@ def _run(args, scene, resume_from, staged, interrupt) -> int:
               f"in {out / 'summary.json'}); {UNSTABLE_HINT}", file=sys.stderr)
         return EXIT_FAILED
     if sim.interrupted:
-        print(f"interrupted at t = {sim.t:.4g} of {sc.run.t_end:.4g} s: kept "
+        print(f"{interrupt.what} at t = {sim.t:.4g} of {sc.run.t_end:.4g} s: kept "
               f"{', '.join(written)} in {out} (status \"interrupted\"); continue with "
               f"python -m taichi_hsdem --resume {out}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return interrupt.code
     if interrupt.requested:
-        print(f"interrupted while the results were written: all of them were written "
-              f"to {out}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        print(f"{interrupt.what} while the results were written: all of them were "
+              f"written to {out}", file=sys.stderr)
+        return interrupt.code
     clogged = sum(1 for r in s["realizations"] if r["clogged"])
     stats = s["statistics"] or {}
     mean = stats.get("mean_escapees_note") or (

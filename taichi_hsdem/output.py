@@ -236,6 +236,7 @@ class Staging:
         self.out.mkdir(parents=True, exist_ok=True)
         try:
             self._take_lock()
+            _remove_stale_staging(self.out)
             self.tmp = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=self.out))
         except BaseException:
             self.__exit__()
@@ -311,6 +312,26 @@ class Staging:
         _replace(self.tmp / "summary.json", self.out / "summary.json")
         _write_manifest(self.out, {n for n in kept if os.path.lexists(self.out / n)})
         return names + ["summary.json"]
+
+
+def _remove_stale_staging(out: Path):
+    """Remove the staging folders in ``out`` that runs killed hard left holding no
+    checkpoint (empty, or only files cut short). Called with ``out``'s lock held, so
+    that no run alive writes them; a staging folder with a checkpoint is kept for
+    ``--resume``."""
+    try:
+        folders = [p for p in out.iterdir() if p.name.startswith(STAGING_PREFIX)]
+    except OSError:
+        return
+    for folder in folders:
+        try:
+            if folder.is_symlink() or not folder.is_dir():
+                continue
+            names = [p.name for p in folder.iterdir()]
+        except OSError:
+            continue
+        if all(n.endswith((".part", ".part.mp4")) for n in names):
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 def _write_manifest(out: Path, names):

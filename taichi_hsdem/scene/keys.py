@@ -466,8 +466,9 @@ class OutputConfig(Config):
                                      "video")
     checkpoint_every: float = keyfield("float", "wall-clock seconds between checkpoints "
                                        "(checkpoint.npz, also written at the end and when "
-                                       "interrupted; --resume continues one); 0: only then, s",
-                                       600.0, ge=0)
+                                       "interrupted, also by SIGTERM or SIGHUP; --resume "
+                                       "continues one); 0: only then, s",
+                                       60.0, ge=0)
 
 
 def vtk_indices(text: str, realizations: int, video: int) -> list[int]:

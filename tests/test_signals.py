@@ -1,0 +1,174 @@
+"""SIGTERM (``kill``, ``timeout``, Slurm) and SIGHUP (the terminal closed) are obeyed
+as Ctrl-C is: during the run the results and a checkpoint are kept; during set-up
+nothing is written; while the results are written they all are; after the run's
+end the line says the result is complete. Each exits 128 + the signal's number
+with one line, and leaves no lock and no staging folder behind."""
+import json
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from taichi_hsdem import checkpoint, output
+from taichi_hsdem.cli import _Interrupt, main
+from taichi_hsdem.scene.keys import OutputConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+VANI = str(ROOT / "scenes" / "vani_phi026.toml")
+HOURGLASS = str(ROOT / "scenes" / "hourglass24.toml")
+# one realization that runs on (no clog ends it early) for about 15 s of wall time
+LONG = ["--realizations", "1", "--set", "fluid.workers=1", "--set", "run.t_end=0.6",
+        "--set", "run.stop_at_clog=false", "--set", "output.series_interval=0.004"]
+CODES = {signal.SIGTERM: 143, signal.SIGHUP: 129}
+
+
+def _leftovers(out: Path) -> list[str]:
+    return [p.name for p in out.iterdir()
+            if p.name.startswith((output.STAGING_PREFIX, output.LOCK))]
+
+
+def _python(code: str, tmp_path: Path) -> subprocess.CompletedProcess:
+    """Run ``code`` in a fresh interpreter (a signal our handler misses would kill
+    pytest itself)."""
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["TERM", "HUP"])
+def test_a_signal_during_the_run_keeps_results_and_a_checkpoint(tmp_path, sig):
+    out = tmp_path / "run"
+    log = tmp_path / "stderr.txt"
+    cmd = [sys.executable, "-m", "taichi_hsdem", VANI, *LONG, "--out", str(out)]
+    with open(log, "w") as fh:
+        proc = subprocess.Popen(cmd, cwd=tmp_path, stderr=fh)
+        deadline = time.time() + 120
+        while time.time() < deadline and "t = " not in log.read_text():
+            time.sleep(0.1)
+        proc.send_signal(sig)
+        proc.wait(timeout=120)
+    err = log.read_text()
+    name = signal.Signals(sig).name
+    assert proc.returncode == CODES[sig], err
+    assert "Traceback" not in err
+    line = err.strip().splitlines()[-1]
+    assert line.startswith(f"stopped by {name} at t = ") and "--resume" in line, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["t_reached"] < 0.6
+    header = checkpoint.read_header(out / checkpoint.FILE)
+    assert header["host"]["t"] == pytest.approx(summary["t_reached"], abs=1e-9)
+    assert _leftovers(out) == []
+    if sig == signal.SIGTERM:      # the checkpoint goes on to the end
+        assert main(["--resume", str(out), "--quiet"]) == 0
+        assert json.loads((out / "summary.json").read_text())["status"] == "complete"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["TERM", "HUP"])
+def test_a_signal_during_set_up_writes_nothing(tmp_path, sig):
+    out = tmp_path / "o"
+    cmd = [sys.executable, "-m", "taichi_hsdem", HOURGLASS, "--out", str(out),
+           "--set", "run.t_end=50", "--quiet"]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and not (out.is_dir() and any(
+            p.name.startswith(output.STAGING_PREFIX) for p in out.iterdir())):
+        time.sleep(0.01)
+    proc.send_signal(sig)
+    err = proc.communicate(timeout=120)[1]
+    name = signal.Signals(sig).name
+    assert proc.returncode == CODES[sig], err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    if "set-up" in err:
+        assert err.strip() == f"stopped by {name} during set-up: nothing was written"
+        assert not out.exists()
+    else:   # set-up had just ended: the run's first chunk kept
+        assert f"stopped by {name} at t =" in err
+        assert _leftovers(out) == []
+
+
+def test_sigterm_while_the_results_are_written_lets_them_all_be_written(tmp_path):
+    out = tmp_path / "o"
+    proc = _python(f"""
+        import os, signal, sys
+        from taichi_hsdem import output
+        from taichi_hsdem.cli import main
+        publish = output.Staging.publish
+        def term_then_publish(self, *args, **kwargs):
+            os.kill(os.getpid(), signal.SIGTERM)
+            return publish(self, *args, **kwargs)
+        output.Staging.publish = term_then_publish
+        sys.exit(main([{HOURGLASS!r}, "--out", {str(out)!r}, "--set", "run.t_end=0.2",
+                       "--quiet"]))
+        """, tmp_path)
+    assert proc.returncode == 143, proc.stderr
+    assert proc.stderr.strip() == (f"stopped by SIGTERM while the results were written: "
+                                   f"all of them were written to {out}")
+    assert json.loads((out / "summary.json").read_text())["status"] == "complete"
+    manifest = set(json.loads((out / output.MANIFEST).read_text())["files"])
+    assert manifest == {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    assert _leftovers(out) == []
+
+
+@pytest.mark.parametrize("when", ["done", "teardown"])
+def test_ctrl_c_just_after_done_says_the_result_is_complete(tmp_path, when):
+    """Ctrl-C right after "done in" (still in main), or while the process winds
+    down after it (Taichi's clean-up): exit 130 and one line saying the result is
+    complete."""
+    out = tmp_path / "o"
+    proc = _python(f"""
+        import atexit, os, signal, sys, time
+        from taichi_hsdem import cli
+        say = cli._say
+        def say_then_ctrl_c(quiet, msg):
+            say(quiet, msg)
+            if msg.startswith("done in") and {when!r} == "done":
+                os.kill(os.getpid(), signal.SIGINT)
+        cli._say = say_then_ctrl_c
+        if {when!r} == "teardown":
+            atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(5)))
+        sys.argv = ["taichi_hsdem", {HOURGLASS!r}, "--out", {str(out)!r},
+                    "--set", "run.t_end=0.2"]
+        sys.exit(cli.main())
+        """, tmp_path)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 130, proc.stderr
+    assert lines[-2].startswith("done in"), proc.stderr
+    assert lines[-1] == f"interrupted after the run had ended: its results in {out} are complete"
+    assert json.loads((out / "summary.json").read_text())["status"] == "complete"
+    assert _leftovers(out) == []
+
+
+def test_stale_staging_folders_without_a_checkpoint_are_removed_when_a_run_starts(
+        tmp_path, capsys):
+    """Staging folders a run killed hard left (empty, or only files cut short) go;
+    one holding a checkpoint stays for --resume."""
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / ".incomplete-empty").mkdir()
+    (out / ".incomplete-cut").mkdir()
+    (out / ".incomplete-cut" / "summary.json.part").write_text("{")
+    (out / ".incomplete-kept").mkdir()
+    (out / ".incomplete-kept" / checkpoint.FILE).write_bytes(b"not read here")
+    assert main([HOURGLASS, "--out", str(out), "--set", "run.t_end=0.2", "--quiet"]) == 0
+    assert _leftovers(out) == [".incomplete-kept"]
+
+
+def test_a_killed_cluster_job_loses_at_most_a_minute():
+    assert 0 < OutputConfig().checkpoint_every <= 60
+
+
+def test_sighup_ignored_by_nohup_stays_ignored_and_the_handlers_are_restored():
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        with _Interrupt() as interrupt:
+            assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
+            assert signal.getsignal(signal.SIGTERM) == interrupt._handler
+            assert signal.getsignal(signal.SIGINT) == interrupt._handler
+        assert signal.getsignal(signal.SIGTERM) == previous[signal.SIGTERM]
+        assert signal.getsignal(signal.SIGINT) == previous[signal.SIGINT]
+    finally:
+        signal.signal(signal.SIGHUP, previous[signal.SIGHUP])
