@@ -174,7 +174,13 @@ def test_every_figure_renders(command, tmp_path):
     runs = [_fake_run(v, str(v), rng, censor_at=(0 if i == 0 else (15 if i == 1 else None)))
             for i, v in enumerate(vals)]
     rows = [figures._point_row(command, r) for r in runs]
-    assert rows[0]["n_clogged"] == 0 and math.isinf(rows[0]["mean_s"])
+    # nothing clogged: no estimate, the one-sided lower bound (issue 46)
+    assert rows[0]["n_clogged"] == 0 and rows[0]["mean_s"] is None
+    assert rows[0]["mean_s_lower_bound"] == rows[0]["mean_s_lo"] > 0
+    if command != "escapees-time":      # its line gives the escape rate, no <s>
+        said = stats.estimate_text(None, None, rows[0]["mean_s_lower_bound"])
+        assert f"<s> = {said}," in figures.summary_line(command, runs[0], rows[0])
+        assert said.endswith("(nothing clogged; 95 % lower bound)")
     pmfs = [stats.pmf_bins(*r.samples()) for r in runs]
     png = tmp_path / f"{command}.png"
     figures.render(command, runs, rows, pmfs, png, "test")
@@ -292,8 +298,11 @@ def _check_stat_outputs(out, name, n_points):
         if mine:
             s = [int(r["escapees"]) for r in mine]
             c = [r["clogged"] == "1" for r in mine]
-            mean, _ = stats.mean_escapees(s, c)
-            assert float(p["mean_s"]) == pytest.approx(mean)
+            mean, (lo, _) = stats.mean_escapees(s, c)
+            if math.isfinite(mean):
+                assert float(p["mean_s"]) == pytest.approx(mean)
+            else:       # nothing clogged: no estimate, the lower bound in its column
+                assert p["mean_s"] == "" and float(p["mean_s_lower_bound"]) == pytest.approx(lo)
     pmf = read_csv(out / "pmf.csv")
     for p in points:
         rows = [r for r in pmf if r["label"] == p["label"]]

@@ -95,3 +95,27 @@ def test_a_clog_before_any_escape_counts_its_window_from_when_the_arch_formed():
     first = [a for a in result.arches if a.realization == 1][0]
     assert first.failure == "escaped" and first.t_broken - first.t_formed < window, first
     assert not (broke["clogged"] and broke["t_clog"] < first.t_broken), broke
+
+
+def test_a_sweep_point_where_nothing_clogged_says_a_lower_bound(tmp_path):
+    """The sweep's point line and sweep.csv say nothing clogged as the run does
+    (stats.estimate_text; issue 46: "- [4.191, -]"): the lower bound, and in the
+    table an empty estimate with the bound in its own column."""
+    import csv
+    from taichi_hsdem.stats import estimate_text, summarize
+    from taichi_hsdem.studies import sweep
+    esc = [3, 7, 1, 12]
+    st = summarize(esc, [False] * 4)
+    summary = {"realizations": [{"seed": k, "escapees": s, "clogged": False, "status": "ok"}
+                                for k, s in enumerate(esc)],
+               "statistics": st, "wall_time_s": 1.0}
+    row = sweep._row("base", {}, "ran", summary)
+    said = estimate_text(None, None, st["mean_escapees_lower_bound"])
+    assert said.startswith("> ") and said.endswith("(nothing clogged; 95 % lower bound)")
+    assert sweep.point_text(row) == f"<s> = {said}, 0/4 clogged"
+    assert st["mean_escapees_note"].endswith(said)          # what the run prints
+    sweep._write_table([row], tmp_path)
+    with open(tmp_path / "sweep.csv", newline="") as fh:
+        (line,) = list(csv.DictReader(fh))
+    assert line["mean_escapees"] == ""
+    assert float(line["mean_escapees_lower_bound"]) == st["mean_escapees_lower_bound"]

@@ -288,7 +288,8 @@ def test_all_censored():
     bound = 0.05 ** (1 / 60) / (1 - 0.05 ** (1 / 60))
     assert d["mean_escapees_lower_bound"] == pytest.approx(bound, rel=1e-12)
     assert d["mean_escapees_note"] == (
-        f"no realization clogged (3 ran): <s> is at least {bound:.3g} (95 % one-sided bound)")
+        f"no realization clogged (3 ran): <s> > {bound:.3g} (nothing clogged; 95 % lower "
+        "bound)")
 
 
 def test_summary_says_why_nothing_is_known_when_nothing_escaped_or_clogged():
@@ -831,3 +832,23 @@ def test_other_invalid_arguments():
         histogram([1, 2], bins=[0, 0, 3])
     # Whole-valued floats (as read back from JSON) are accepted.
     assert fit_geometric([1.0, 3.0], [True, True]).p == pytest.approx(2 / 6)  # k / (k + S)
+
+
+def test_one_way_to_say_nothing_clogged():
+    """Every writer of <s> goes through stats.estimate_text: the run's note, a
+    sweep's point line, a figure's point line and tools/sweep_changes.py say a
+    censored-only <s> as "> bound (nothing clogged; 95 % lower bound)" whether they
+    hold it as None (summary.json) or as infinite (a figure's row); an estimate keeps
+    its interval; CSV and JSON get a null estimate with the bound in its own field."""
+    from taichi_hsdem.stats import censored_fields, estimate_text
+    said = "> 2.86 (nothing clogged; 95 % lower bound)"
+    assert estimate_text(None, [2.857, None]) == said
+    assert estimate_text(math.inf, (2.857, math.inf)) == said
+    assert estimate_text(float("nan"), (2.857, float("nan"))) == said
+    assert estimate_text(None, None, lower_bound=2.857) == said
+    assert estimate_text(8.5, (3.389, 28.47)) == "8.5 [3.39, 28.5]"
+    assert censored_fields(math.inf, (2.857, math.inf)) == (None, 2.857)
+    assert censored_fields(8.5, (3.389, 28.47)) == (8.5, None)
+    d = summarize([10, 20, 30], [False, False, False])
+    assert d["mean_escapees_note"].endswith(
+        estimate_text(d["mean_escapees"], d["mean_escapees_ci"]))

@@ -230,10 +230,33 @@ def test_sweep_changes_compares_points_paired_by_seed(tmp_path):
     assert "+10.00 [+10.00, +10.00]" in rows["more"] and rows["more"].endswith("| yes | yes |")
     assert "+0.00 [+0.00, +0.00]" in rows["same"] and rows["same"].endswith("| no | no |")
     assert rows["noisy"].endswith("| yes | no |")
-    assert "- [-, -] | 0 of 10 | no stable realization to compare | - | - |" in rows["unstable"]
+    assert "| - | 0 of 10 | no stable realization to compare | - | - |" in rows["unstable"]
     assert "beyond chance over all 3 (Bonferroni)" in text.splitlines()[0]
     assert "(reference)" in rows["base"]
     assert tool.main([str(tmp_path), "--reference", "nothing"]) == 2
+
+
+def test_sweep_changes_says_nothing_clogged_as_a_lower_bound(tmp_path):
+    """A point where nothing clogged: its <s> as every message writes it (a lower
+    bound, from summary.json's statistics), and no change (issue 46: it printed
+    "+nan [-inf, +inf]")."""
+    import json
+    from taichi_hsdem.stats import summarize
+    tool = _load("sweep_changes")
+    for name, clogged in (("base", True), ("never", False)):
+        esc = [3, 7, 1, 12, 5]
+        st = summarize(esc, [clogged] * 5)
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "summary.json").write_text(json.dumps(
+            {"realizations": [{"seed": k, "escapees": s, "clogged": clogged, "status": "ok"}
+                              for k, s in enumerate(esc)],
+             "mean_escapees": st["mean_escapees"], "mean_escapees_ci": st["mean_escapees_ci"],
+             "statistics": st}))
+    rows = {line.split("|")[1].strip(): line for line in tool.table(tmp_path).splitlines()[2:]}
+    bound = summarize([3, 7, 1, 12, 5], [False] * 5)["mean_escapees_lower_bound"]
+    assert (f"| never | > {bound:.3g} (nothing clogged; 95 % lower bound) | 0 of 5 | none: "
+            "nothing clogged in this point (its <s> is a lower bound) | - | - |") == rows["never"]
+    assert "nan" not in rows["never"] and "inf" not in rows["never"]
 
 
 def test_throat_study_reports_an_ensemble_that_never_clogged():

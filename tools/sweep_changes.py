@@ -29,13 +29,27 @@ from taichi_hsdem.exits import EXIT_INVALID, EXIT_OK, Parser
 
 
 def _counts(folder: pathlib.Path):
-    """``(seeds, escapees, clogged, mean, ci, n)`` of a point: the seeds, escapees and
-    clogs of its stable realizations, its ``<s>`` and interval (None where it has
-    none) and how many realizations it ran."""
+    """``(seeds, escapees, clogged, <s>, n)`` of a point: the seeds, escapees and
+    clogs of its stable realizations, its ``<s>`` as every message writes it
+    (:func:`taichi_hsdem.stats.estimate_text`: a lower bound when nothing clogged)
+    and how many realizations it ran."""
+    from taichi_hsdem.stats import estimate_text
     s = json.loads((folder / "summary.json").read_text())
     ok = [r for r in s["realizations"] if r["status"] == "ok"]
+    bound = (s.get("statistics") or {}).get("mean_escapees_lower_bound")
     return ([r["seed"] for r in ok], [r["escapees"] for r in ok], [bool(r["clogged"]) for r in ok],
-            s["mean_escapees"], s["mean_escapees_ci"] or (None, None), len(s["realizations"]))
+            estimate_text(s["mean_escapees"], s["mean_escapees_ci"] or (None, None), bound),
+            len(s["realizations"]))
+
+
+def _no_change(ref_clog, clog) -> str | None:
+    """Why the change of ``<s>`` is undefined (nothing clogged on a side: that
+    ``<s>`` is a lower bound only), else None."""
+    sides = [name for name, c in (("the reference", ref_clog), ("this point", clog))
+             if not any(c)]
+    if not sides:
+        return None
+    return f"none: nothing clogged in {' or '.join(sides)} (its <s> is a lower bound)"
 
 
 def _moves(lo: float, hi: float) -> str:
@@ -45,7 +59,6 @@ def _moves(lo: float, hi: float) -> str:
 def table(out: pathlib.Path, reference: str = "base") -> str:
     """The markdown table of every point of ``out`` against ``reference``."""
     from taichi_hsdem.stats import mean_difference
-    from taichi_hsdem.studies import fmt
     ref = _counts(out / reference)
     points = {f.name: _counts(f) for f in sorted(out.iterdir())
               if (f / "summary.json").exists()}
@@ -56,13 +69,17 @@ def table(out: pathlib.Path, reference: str = "base") -> str:
     rows = ["| point | `<s>` [95 %] | clogged | change from the reference [95 %, paired] "
             f"| moves `<s>` | beyond chance over all {k} (Bonferroni) |",
             "|---|---|---|---|---|---|"]
-    for name, (seeds, esc, clog, mean, (lo, hi), n) in points.items():
-        line = (f"| {name} | {fmt(mean)} [{fmt(lo)}, {fmt(hi)}] | {sum(clog)} of {n} |")
+    for name, (seeds, esc, clog, mean, n) in points.items():
+        line = f"| {name} | {mean} | {sum(clog)} of {n} |"
         if name == reference:
             rows.append(line + " (reference) | | |")
             continue
         if not seeds or not ref[0]:
             rows.append(line + " no stable realization to compare | - | - |")
+            continue
+        why = _no_change(ref[2], clog)
+        if why:
+            rows.append(line + f" {why} | - | - |")
             continue
         paired = seeds == ref[0]
         diff, (dlo, dhi) = mean_difference(ref[1], ref[2], esc, clog, method="bca",

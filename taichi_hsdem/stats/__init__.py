@@ -25,6 +25,9 @@ One module per concern, re-exported here as a flat API:
   (:func:`geometric_fit_test`), reported from :data:`MIN_CLOGS` clogs on.
 * :mod:`.summary`: everything in one JSON-ready dict (:func:`summarize`), and
   the bias unstable realizations may carry (:func:`unstable_sensitivity`).
+* :mod:`.text`: the one way every message, table and figure writes ``<s>``
+  (:func:`estimate_text`: ``> 2.86 (nothing clogged; 95 % lower bound)`` when
+  nothing clogged; :func:`censored_fields` for CSV and JSON).
 
 Examples
 --------
@@ -46,6 +49,7 @@ from .geometric import (
 from .gof import MIN_CLOGS, GeometricFitTest, geometric_fit_test, hazard_table
 from .pmf import PMF_BIN_FRACTION, histogram, normalized_pmf, pmf_bins
 from .summary import summarize, unstable_sensitivity
+from .text import censored_fields, estimate_text
 
 __all__ = [
     "GeometricFit",
@@ -65,4 +69,6 @@ __all__ = [
     "hazard_table",
     "summarize",
     "unstable_sensitivity",
+    "estimate_text",
+    "censored_fields",
 ]

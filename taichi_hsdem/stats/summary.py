@@ -19,6 +19,7 @@ from ._inputs import as_escapees, as_samples, check_confidence
 from .geometric import fit_geometric, never_clogged_fraction
 from .gof import geometric_fit_test
 from .pmf import PMF_BIN_FRACTION, _pmf_undefined_reason, histogram, pmf_bins
+from .text import estimate_text
 
 UNSTABLE_NOTE = (
     "unstable realizations are left out of every statistic, as if censored at s = 0: "
@@ -175,7 +176,7 @@ def summarize(escapees, clogged, confidence: float = 0.95, *,
     >>> d["clog_probability_per_escapee"], d["mean_escapees"], d["n_unstable"]
     (0.0, None, 1)
     >>> round(d["mean_escapees_lower_bound"], 2), d["mean_escapees_note"]
-    (19.53, 'no realization clogged (3 ran): <s> is at least 19.5 (95 % one-sided bound)')
+    (19.53, 'no realization clogged (3 ran): <s> > 19.5 (nothing clogged; 95 % lower bound)')
     >>> _ = json.dumps(d, allow_nan=False)
     """
     confidence = check_confidence(confidence)
@@ -197,8 +198,8 @@ def summarize(escapees, clogged, confidence: float = 0.95, *,
                     "nothing about <s>")
         else:
             lower_bound = fit.mean_ci[0]
-            note = (f"no realization clogged ({fit.n} ran): <s> is at least "
-                    f"{lower_bound:.3g} ({100 * confidence:g} % one-sided bound)")
+            note = (f"no realization clogged ({fit.n} ran): <s> "
+                    f"{estimate_text(None, None, lower_bound, confidence)}")
     unstable = unstable_sensitivity(s, c, n_unstable, unstable_escapees)
     return _plain({
         "n": fit.n,

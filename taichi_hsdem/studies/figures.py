@@ -178,7 +178,8 @@ def point_stats(run: PointRun) -> dict:
     d = {"realizations": len(run.rows), "n_ok": int(s.size), "n_unstable": n_unstable}
     if s.size == 0:
         d.update(n_clogged=0, n_censored=0, mean_s=math.nan, mean_s_lo=math.nan,
-                 mean_s_hi=math.nan, mean_method="", observed_mean_s=math.nan,
+                 mean_s_hi=math.nan, mean_s_lower_bound=None, mean_method="",
+                 observed_mean_s=math.nan,
                  p_clog=math.nan, decay_rate=math.nan, decay_rate_lo=math.nan,
                  decay_rate_hi=math.nan, decay_rate_stderr=math.nan,
                  decay_rate_x=math.nan, pmf_lsq_rate_x=math.nan,
@@ -189,8 +190,10 @@ def point_stats(run: PointRun) -> dict:
     method = stats.summarize(s, c)["mean_escapees_method"]
     never, (nlo, nhi) = stats.never_clogged_fraction(c)
     bins = stats.pmf_bins(s, c)
+    # nothing clogged: no estimate, its one-sided lower bound in its own column
+    mean, bound = stats.censored_fields(mean, (lo, hi))
     d.update(n_clogged=fit.n_clogged, n_censored=fit.n_censored, mean_s=mean,
-             mean_s_lo=lo, mean_s_hi=hi, mean_method=method,
+             mean_s_lo=lo, mean_s_hi=hi, mean_s_lower_bound=bound, mean_method=method,
              observed_mean_s=float(s.mean()),
              p_clog=fit.p, decay_rate=fit.decay_rate, decay_rate_lo=fit.decay_rate_ci[0],
              decay_rate_hi=fit.decay_rate_ci[1], decay_rate_stderr=fit.decay_rate_stderr,
@@ -248,7 +251,9 @@ def summary_line(command: str, run: PointRun, row: dict) -> str:
                 f"{row['rate']:.3g} +- {row['rate_stderr']:.2g} /s vs theory "
                 f"{row['theory_rate']:.3g} /s (ratio {row['rate_ratio']:.2f}), {run.wall:.1f} s"
                 f"{_kept(run)}")
-    return (f"{head}, <s> = {_interval_text(row['mean_s'], row['mean_s_lo'], row['mean_s_hi'])}, "
+    mean = stats.estimate_text(row["mean_s"], (row["mean_s_lo"], row["mean_s_hi"]),
+                               row.get("mean_s_lower_bound"))
+    return (f"{head}, <s> = {mean}, "
             f"lambda = {_interval_text(row['decay_rate'], row['decay_rate_lo'], row['decay_rate_hi'])}"
             f" /escapee, {run.wall:.1f} s{_kept(run)}")
 

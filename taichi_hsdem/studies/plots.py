@@ -25,21 +25,25 @@ def pyplot():
 
 
 def _err_mean(rows):
-    """Means and asymmetric error bars with infinite ends drawn as arrows."""
-    y = np.array([r["mean_s"] for r in rows], dtype=float)
+    """Means and asymmetric error bars with infinite ends drawn as arrows; where
+    nothing clogged, the one-sided lower bound (``mean_s_lower_bound``, as every
+    message says it: :func:`taichi_hsdem.stats.estimate_text`), never the plain
+    mean of the counts. Also returns which points are such bounds."""
+    y = np.array([np.nan if r["mean_s"] is None else r["mean_s"] for r in rows], dtype=float)
     lo = np.array([r["mean_s_lo"] for r in rows], dtype=float)
     hi = np.array([r["mean_s_hi"] for r in rows], dtype=float)
-    obs = np.array([r["observed_mean_s"] for r in rows], dtype=float)
-    unbounded = ~np.isfinite(y)
-    # no clog at all: plot the observed mean, a lower bound
-    y = np.where(unbounded, obs, y)
+    bound = np.array([np.nan if r.get("mean_s_lower_bound") is None else r["mean_s_lower_bound"]
+                      for r in rows], dtype=float)
+    is_bound = ~np.isfinite(y) & np.isfinite(bound)
+    y = np.where(is_bound, bound, y)
     finite_hi = hi[np.isfinite(hi)]
     cap = (np.nanmax(np.concatenate([finite_hi, y[np.isfinite(y)]])) * 1.5
            if np.isfinite(y).any() else 1.0)
     hi_open = ~np.isfinite(hi)
     hi = np.where(hi_open, np.maximum(cap, y), hi)
     lo = np.where(np.isfinite(lo), lo, y)
-    return y, np.vstack([np.clip(y - lo, 0, None), np.clip(hi - y, 0, None)]), hi_open
+    return (y, np.vstack([np.clip(y - lo, 0, None), np.clip(hi - y, 0, None)]), hi_open,
+            is_bound)
 
 
 def _pmf_panel(ax, groups, title="PMF of s/<s>"):
@@ -147,8 +151,17 @@ def plot_pmf_collapse(runs, rows, pmfs, path: Path, meta: str):
 
 
 def _mean_decay_panels(a1, a2, x, rows, xlabel, labels=None, xticks=None, series_label=None):
-    y, yerr, open_hi = _err_mean(rows)
-    a1.errorbar(x, y, yerr=yerr, fmt="o-", capsize=3, label=series_label)
+    y, yerr, open_hi, is_bound = _err_mean(rows)
+    a1.errorbar(x, np.where(is_bound, np.nan, y), yerr=yerr, fmt="o-", capsize=3,
+                label=series_label)
+    if is_bound.any():     # nothing clogged: the lower bound, open above
+        xb = np.asarray(x)[is_bound]
+        a1.errorbar(xb, y[is_bound], yerr=yerr[:, is_bound], fmt="none", capsize=0,
+                    ecolor="0.5")
+        a1.plot(xb, y[is_bound], "_", color="0.3", ms=12, mew=2,
+                label="nothing clogged: 95 % lower bound" if not
+                a1.get_legend_handles_labels()[1].count("nothing clogged: 95 % lower bound")
+                else None)
     if open_hi.any():
         a1.plot(np.asarray(x)[open_hi], yerr[1][open_hi] + y[open_hi], "^", color="0.3", ms=5,
                 label="interval open above" if not a1.get_legend_handles_labels()[1].count(

@@ -68,7 +68,6 @@ from typing import Any, Callable, Mapping, Sequence
 from ..output import atomic_write
 from ..scene import Scene, SceneError, load_scene, read_toml, scene_to_toml
 from ..scene.toml import toml_value
-from . import fmt
 from ..digest import code_digest
 from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
 from .cluster import Cluster
@@ -332,6 +331,8 @@ def _row(folder: str, point: Mapping, status: str, summary: dict | None,
         n_clogged=sum(1 for r in ok if r.get("clogged")),
         mean_escapees=st.get("mean_escapees"),
         mean_escapees_ci=st.get("mean_escapees_ci") or [None, None],
+        # nothing clogged: no estimate, the one-sided lower bound here
+        mean_escapees_lower_bound=st.get("mean_escapees_lower_bound"),
         mean_escapees_method=st.get("mean_escapees_method"),
         decay_rate=st.get("decay_rate"),
         decay_rate_ci=st.get("decay_rate_ci") or [None, None],
@@ -341,8 +342,18 @@ def _row(folder: str, point: Mapping, status: str, summary: dict | None,
     return row
 
 
+def point_text(row: Mapping) -> str:
+    """A finished point's statistics for its line: ``<s>`` as every message says it
+    (:func:`taichi_hsdem.stats.estimate_text`; a lower bound when nothing clogged)
+    and the clogs."""
+    from ..stats.text import estimate_text
+    mean = estimate_text(row["mean_escapees"], row["mean_escapees_ci"],
+                         row.get("mean_escapees_lower_bound"))
+    return f"<s> = {mean}, {row['n_clogged']}/{row['n_ok']} clogged"
+
+
 _CSV_STATS = ("n", "n_ok", "n_unstable", "n_clogged", "mean_escapees",
-              "mean_escapees_ci", "mean_escapees_method", "decay_rate", "decay_rate_ci",
+              "mean_escapees_ci", "mean_escapees_lower_bound", "mean_escapees_method", "decay_rate", "decay_rate_ci",
               "never_clogged_fraction", "never_clogged_fraction_ci", "wall_time_s")
 
 
@@ -430,7 +441,8 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
         ``"failed"``: no result, see ``message``, ``"invalid"``: the set-up was
         refused), ``overrides``, ``message`` and the statistics of ``sweep.csv``
         (``n``, ``n_ok``, ``n_unstable``, ``n_clogged``, ``mean_escapees`` and its
-        ``_ci``, ``decay_rate`` and its ``_ci``, ``never_clogged_fraction`` and its
+        ``_ci``, ``mean_escapees_lower_bound``: when nothing clogged, with
+        ``mean_escapees`` None, ``decay_rate`` and its ``_ci``, ``never_clogged_fraction`` and its
         ``_ci``, ``wall_time_s``).
 
     Raises
@@ -476,10 +488,8 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
         if summary is None:
             say(f"{head}: {'refused' if status == 'invalid' else 'failed'}: {message}")
             return
-        mean, (lo, hi) = rows[k]["mean_escapees"], rows[k]["mean_escapees_ci"]
-        say(f"{head}: done in {summary['wall_time_s']:.1f} s, mean escapees "
-            f"{fmt(mean)} [{fmt(lo)}, {fmt(hi)}], {rows[k]['n_clogged']}/{rows[k]['n_ok']} "
-            f"clogged" + (f"; {message}" if message else ""))
+        say(f"{head}: done in {summary['wall_time_s']:.1f} s, {point_text(rows[k])}"
+            + (f"; {message}" if message else ""))
 
     with Cluster(cluster) as pool:
         pool.run(run_point, tasks, finished)
