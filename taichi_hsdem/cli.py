@@ -454,6 +454,9 @@ def _run(args, scene, resume_from, staged, interrupt) -> int:
         print(f"could not write the results to {out}: {exc.strerror or exc}; none of "
               "them was kept", file=sys.stderr)
         return EXIT_FAILED
+    if pictures.failed:         # the user asked for it: not a silent success
+        print(f"{pictures.failed}; the other results were written to {out}",
+              file=sys.stderr)
     if bad:
         print(f"the unstable realizations' results were not written (status \"failed\" "
               f"in {out / 'summary.json'}); {UNSTABLE_HINT}", file=sys.stderr)
@@ -475,7 +478,7 @@ def _run(args, scene, resume_from, staged, interrupt) -> int:
     _say(args.quiet, f"done in {s['wall_time_s']:.1f} s: {s['steps']} steps, {mean}, "
          f"{clogged}/{len(s['realizations'])} clogged, "
          f"{stats.get('n_never_clogged', 0)} never clogged -> {out}")
-    return EXIT_OK
+    return EXIT_FAILED if pictures.failed else EXIT_OK
 
 
 if __name__ == "__main__":

@@ -382,6 +382,8 @@ class Pictures:
         self.recorder = None
         self.vtk = None
         self.notes: dict = {}
+        #: what was asked for and could not be drawn (one line), once finished
+        self.failed: str | None = None
         sc = sim.scene
         viewer = None
         if view:
@@ -437,9 +439,8 @@ class Pictures:
         if self.recorder is not None:
             self.recorder.close(keep=True)
             summary["video"] = self.recorder.summary(summary["wall_time_s"])
-            if self.recorder.error is not None:
-                print(f"video not written: rendering failed ({self.recorder.error})",
-                      file=sys.stderr)
+            if self.recorder.error is not None and self.recorder.path is not None:
+                self.failed = f"video not written: rendering failed ({self.recorder.error})"
             if not self.staged.path("video.mp4").exists():
                 # e.g. a continued run with no frame time left: name no file
                 summary["video"]["file"] = None

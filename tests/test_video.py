@@ -371,3 +371,72 @@ def test_without_vulkan_the_run_succeeds_without_a_video(tmp_path):
     assert summary["video"]["file"] is None and "libvulkan1" in summary["video"]["skipped"]
     assert_no_stray_files(work)
     assert_no_stray_files(tmp)
+
+
+# ------------------------------------------------------------------ every width
+
+VANI = REPO / "scenes" / "vani_phi026.toml"
+
+
+@pytest.mark.parametrize("title, units", [("", "SI"), ("vani_phi026", "SI"),
+                                          ("a rather long scene name", "dimensionless")])
+def test_the_strip_is_drawn_at_every_accepted_width(title, units):
+    """The strip under the frame (time, count, pressure legend) at every even width
+    the scene accepts (output.width, 64 to MAX_VIDEO_WIDTH): narrow frames drop the
+    legend's unit, then the legend, never the time; no width raises (at 128 the
+    legend once overran the left edge: IndexError, and no video)."""
+    from taichi_hsdem.limits import MAX_VIDEO_WIDTH
+    from taichi_hsdem.render.font import GLYPH_H, even
+    from taichi_hsdem.render.frame import _UNIT_LABELS, TEXT_COLOR, Renderer
+    widths = sorted({*range(64, 1026, 2), *range(1024, MAX_VIDEO_WIDTH + 1, 256),
+                     MAX_VIDEO_WIDTH})
+    for width in widths:
+        rend = object.__new__(Renderer)          # the strip needs no Taichi fields
+        rend.width = even(width)
+        rend._scale = max(1, int(round(rend.width / 480)))
+        rend.title = title
+        rend.time_unit, rend.pressure_unit = _UNIT_LABELS[units]
+        strip = np.zeros((even((GLYPH_H + 8) * rend._scale), rend.width, 3), np.uint8)
+        for p_range in (None, (-1.234e-5, 98765.4), (100.0, 200.0)):
+            rend._draw_strip(strip, 0.01234, 17, p_range)
+            text = (strip == TEXT_COLOR).all(axis=2)
+            k = rend._scale
+            # the time's first glyphs start at the left margin
+            assert text[:, 4 * k:10 * k].any(), (width, p_range)
+
+
+@pytest.mark.parametrize("width", [64, 128])
+def test_a_video_is_written_at_the_narrowest_widths(tmp_path, width):
+    needs_vulkan()
+    out = tmp_path / "out"
+    proc = run_cli(VANI, out, tmp_path, "--realizations", "1", "--video", "--set",
+                   f"output.width={width}", "--set", "run.t_end=0.05", "--quiet")
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr[-3000:]
+    meta, frames = read_video(out / "video.mp4")
+    assert frames[0].shape[1] == width
+    assert json.loads((out / "summary.json").read_text())["video"]["error"] is None
+
+
+def test_a_video_that_fails_to_render_exits_1_with_one_line(tmp_path):
+    """The user asked for the video: its failure is not a silent success; the other
+    results are written."""
+    needs_vulkan()
+    out = tmp_path / "out"
+    code = f"""
+import sys
+from taichi_hsdem.render import frame
+def broken(self, *args, **kwargs):
+    raise IndexError("drawn off the frame")
+frame.Renderer.draw = broken
+from taichi_hsdem.cli import main
+sys.exit(main([{str(HOURGLASS)!r}, "--out", {str(out)!r}, "--video", "--quiet",
+               "--set", "run.t_end=0.2"]))
+"""
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=_env(),
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    assert proc.stderr.strip() == ("video not written: rendering failed (IndexError: drawn "
+                                   f"off the frame); the other results were written to {out}")
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "complete" and summary["video"]["file"] is None
+    assert not (out / "video.mp4").exists() and not list(out.glob("*.part*"))

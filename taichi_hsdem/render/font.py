@@ -62,7 +62,12 @@ def text_mask(text, scale):
 
 
 def stamp(image, mask, row, col, colour):
-    """Paint ``colour`` where ``mask`` is set, top-left at (row, col), clipped."""
+    """Paint ``colour`` where ``mask`` is set, top-left at (row, col), clipped to
+    the image on every side."""
+    if row < 0:
+        mask, row = mask[-row:], 0
+    if col < 0:
+        mask, col = mask[:, -col:], 0
     h = max(0, min(mask.shape[0], image.shape[0] - row))
     w = max(0, min(mask.shape[1], image.shape[1] - col))
     if h and w:

@@ -290,7 +290,9 @@ class Renderer:
     ``"t = 1.234 s   escapees 12"`` (after the title, if any) on the left and,
     when a pressure map is drawn, the colour bar on the right, labelled with the
     pressure's unit and the range it spans: ``p (Pa) 0 [bar] 1.2e+03``. Where
-    the strip is too short for all of it the bar narrows, then the title goes.
+    the strip is too short for all of it the bar narrows, then the title goes,
+    then ``p (Pa)``, then the bar and its labels; the text is cut at the right
+    edge last.
 
     Parameters
     ----------
@@ -580,23 +582,32 @@ class Renderer:
         text = text_mask(f"{self.title}   {status}" if self.title else status, k)
         text_end = strip.shape[1]
         if p_range is not None:
-            # From the right: p_max label, colour bar, "p (unit) p_min" label.
+            # From the right: p_max label, colour bar, "p (unit) p_min" label. A
+            # narrow frame drops the "p (unit)" first, then the whole legend (the
+            # time and count matter more).
             hi = text_mask(f"{p_range[1]:.3g}", k)
-            lo = text_mask(f"p ({self.pressure_unit}) {p_range[0]:.3g}", k)
-            # what the bar may take: the strip less margins, gaps and labels
-            room = strip.shape[1] - 18 * k - hi.shape[1] - lo.shape[1]
             min_bar = 32 * k
-            if self.title and room - text.shape[1] < min_bar:
-                text = text_mask(status, k)       # the time and count matter more
-            bar_width = max(min_bar, min(self.width // 5, room - text.shape[1]))
-            col = strip.shape[1] - 4 * k - hi.shape[1]
-            stamp(strip, hi, top, col, TEXT_COLOR)
-            col -= 2 * k + bar_width
-            strip[top:top + GLYPH_H * k, col:col + bar_width] = colormap(
-                np.linspace(0.0, 1.0, bar_width))[None, :, :]
-            col -= 2 * k + lo.shape[1]
-            stamp(strip, lo, top, col, TEXT_COLOR)
-            text_end = col - 6 * k
+            need = min_bar + text_mask(status, k).shape[1]
+            for label in (f"p ({self.pressure_unit}) {p_range[0]:.3g}", f"{p_range[0]:.3g}"):
+                lo = text_mask(label, k)
+                # what the bar may take: the strip less margins, gaps and labels
+                room = strip.shape[1] - 18 * k - hi.shape[1] - lo.shape[1]
+                if room >= need:
+                    break
+            if room >= need:
+                if self.title and room - text.shape[1] < min_bar:
+                    text = text_mask(status, k)       # the time and count matter more
+                bar_width = max(min_bar, min(self.width // 5, room - text.shape[1]))
+                col = strip.shape[1] - 4 * k - hi.shape[1]
+                stamp(strip, hi, top, col, TEXT_COLOR)
+                col -= 2 * k + bar_width
+                strip[top:top + GLYPH_H * k, col:col + bar_width] = colormap(
+                    np.linspace(0.0, 1.0, bar_width))[None, :, :]
+                col -= 2 * k + lo.shape[1]
+                stamp(strip, lo, top, col, TEXT_COLOR)
+                text_end = col - 6 * k
+            elif self.title:
+                text = text_mask(status, k)
         stamp(strip, text[:, :max(0, text_end - 4 * k)], top, 4 * k, TEXT_COLOR)
 
     def close(self):
