@@ -295,22 +295,32 @@ def check_continuable(header: dict, scene, path) -> None:
         raise CheckpointError(f"{path}: written by other code (package sources or library "
                               "versions changed since); it cannot continue bit for bit: run "
                               "the scene again from the start")
-    mine = scene.with_values({"run.t_end": 1.0, "output.dir": "-"})
-    theirs = load_scene(parse_toml(header["scene"])).with_values(
-        {"run.t_end": 1.0, "output.dir": "-"})
+    difference = scene_difference(load_scene(parse_toml(header["scene"])), scene,
+                                  "in the checkpoint", "here")
+    if difference:
+        raise CheckpointError(f"{path}: {difference}: only run.t_end and the output keys "
+                              "can change on --resume")
+
+
+def scene_difference(theirs, mine, where_theirs: str, where_mine: str) -> str | None:
+    """The first key (other than ``run.t_end`` and the output keys) whose value
+    differs between two scenes, as ``particles[0].friction is 0.4 in
+    <where_theirs>, 0.5 <where_mine>``; None when they are the same run."""
+    mine = mine.with_values({"run.t_end": 1.0, "output.dir": "-"})
+    theirs = theirs.with_values({"run.t_end": 1.0, "output.dir": "-"})
     tables = [(section, getattr(mine, section).to_dict(), getattr(theirs, section).to_dict())
               for section in ("run", "fluid", "geometry", "contact", "damping", "feed", "clog")]
     if len(mine.particles) != len(theirs.particles):
-        raise CheckpointError(f"{path}: the checkpoint has {len(theirs.particles)} particle "
-                              f"species, this scene {len(mine.particles)}")
+        return (f"{len(theirs.particles)} particle species {where_theirs}, "
+                f"{len(mine.particles)} {where_mine}")
     tables += [(f"particles[{k}]", a.to_dict(), b.to_dict())
                for k, (a, b) in enumerate(zip(mine.particles, theirs.particles))]
     for where, a, b in tables:
         for key in sorted(set(a) | set(b)):
             if a.get(key) != b.get(key):
-                raise CheckpointError(f"{path}: {where}.{key} is {b.get(key)!r} in the "
-                                      f"checkpoint, {a.get(key)!r} here: only run.t_end and "
-                                      "the output keys can change on --resume")
+                return (f"{where}.{key} is {b.get(key)!r} {where_theirs}, {a.get(key)!r} "
+                        f"{where_mine}")
+    return None
 
 
 def restore(sim, path) -> dict:

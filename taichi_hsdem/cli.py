@@ -254,6 +254,27 @@ def _load(args) -> tuple:
     return scene, path
 
 
+def _other_scene_problem(folder: Path, scene, path: Path) -> str | None:
+    """Why the checkpoint ``path`` (of ``scene``) cannot continue in place in
+    ``folder``: it is of another scene than the result a run left there (its
+    ``scene.resolved.toml``), or None. A continued run replaces that result, so
+    the two must be one run."""
+    resolved = folder / "scene.resolved.toml"
+    if "scene.resolved.toml" not in output.owned_files(folder) or not resolved.is_file():
+        return None
+    try:
+        theirs = load_scene(parse_toml(resolved.read_text()))
+    except (OSError, UnicodeDecodeError, SceneError):
+        return None             # nothing to compare with: the run replaces it whole
+    difference = checkpoint.scene_difference(scene, theirs, "in the checkpoint",
+                                             f"in {resolved}")
+    if difference is None:
+        return None
+    return (f"--resume: {path} is of another scene than the result in {folder} "
+            f"({difference}): continue it into another folder with --resume {folder} "
+            "--out OTHER, or run the scene again")
+
+
 def _home_of(folder: Path) -> Path:
     """Where a run continued from ``folder`` publishes: the folder itself, or for
     the staging folder of a run killed hard, the output folder it lies in."""
@@ -353,6 +374,8 @@ def _main(args, interrupt) -> int:
     continuing = resume_dir is not None and _same_folder(out, resume_dir)
     interrupt.out = out
     problem = output_folder_problem(out, where)
+    if problem is None and continuing:
+        problem = _other_scene_problem(out, scene, resume_from)
     if problem:
         print(problem, file=sys.stderr)
         return EXIT_INVALID

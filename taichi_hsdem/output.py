@@ -278,9 +278,9 @@ class Staging:
         """Write the scene, the series, the arches and the summary beside the files
         ``extra`` already staged (the checkpoint among them when it waited here),
         then move them all into the folder (summary last) and record them in the
-        manifest; returns the names written. A fresh run removes the files an earlier run
-        wrote and it does not; a continued run keeps the earlier part's files it
-        does not replace. Nothing the runs of this project did not write is
+        manifest; returns the names written. The files an earlier run wrote and
+        this one does not are removed (a run continued in place too: its result is
+        the whole run's). Nothing the runs of this project did not write is
         touched."""
         statuses = [r["status"] for r in result.summary["realizations"]]
         write_resolved_scene(result.scene, self.tmp, result.notes)
@@ -300,8 +300,6 @@ class Staging:
         write_summary(result.summary, self.tmp)
         earlier = owned_files(self.out)
         kept = set(names) | {"summary.json", checkpoint.FILE}
-        if self.continuing:
-            kept |= earlier
         # the manifest first names every file this and the earlier run wrote, so
         # that a crash part-way leaves no file of ours unlisted
         _write_manifest(self.out, kept | earlier)

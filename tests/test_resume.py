@@ -361,3 +361,50 @@ def test_resumed_between_an_escape_and_the_clog_keeps_its_clog_time(tmp_path):
     resumed = second.run()
     assert row["clogged"] and row["t_last_escape"] < row["t_clog"]
     _same(straight, resumed)
+
+
+# --------------------------------------------------------------- resuming in place
+
+def _files(folder):
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+
+
+def test_in_place_resume_removes_what_the_resumed_run_does_not_write(tmp_path, capsys):
+    """A run continued in its own folder publishes the whole run, as into another
+    folder: files of the earlier part it does not write (a video, a ParaView series
+    it was not asked for this time) go."""
+    from taichi_hsdem import output, render
+    out = tmp_path / "run"
+    video = ["--video"] if render.vulkan_status()[0] else []
+    assert main([str(HOURGLASS), "--out", str(out), "--quiet", "--set", "run.t_end=0.2",
+                 "--vtk", *video]) == 0
+    assert (out / "series.pvd").is_file() and (out / "vtk").is_dir()
+    assert main(["--resume", str(out), "--quiet", "--set", "run.t_end=0.3", "--no-video",
+                 "--set", "output.vtk=false"]) == 0
+    left = {p.name for p in out.iterdir()}
+    assert not left & {"video.mp4", "series.pvd", "vtk"}, left
+    manifest = set(json.loads((out / output.MANIFEST).read_text())["files"])
+    assert manifest == {n for n in left if not n.startswith(".")}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "complete" and summary["t_reached"] == pytest.approx(0.3,
+                                                                                      abs=1e-2)
+
+
+def test_in_place_resume_refuses_a_checkpoint_of_another_scene(tmp_path, capsys):
+    """Another scene's checkpoint.npz copied into a run's folder: --resume there is
+    refused in one line naming a key that differs, and the folder stays as it was;
+    into another folder it goes on."""
+    x, y, z = tmp_path / "x", tmp_path / "y", tmp_path / "z"
+    assert main([str(HOURGLASS), "--out", str(x), "--quiet", "--set", "run.t_end=0.2"]) == 0
+    assert main([str(VANI), "--out", str(y), "--quiet", "--realizations", "1",
+                 "--set", "run.t_end=0.01"]) == 0
+    shutil.copy2(y / checkpoint.FILE, x / checkpoint.FILE)
+    before = _files(x)
+    capsys.readouterr()
+    assert main(["--resume", str(x), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "another scene" in err, err
+    assert "in the checkpoint" in err and "--out" in err
+    assert _files(x) == before
+    assert main(["--resume", str(x), "--out", str(z), "--quiet"]) == 0
+    assert 'name = "vani_phi026"' in (z / "scene.resolved.toml").read_text()
