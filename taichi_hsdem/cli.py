@@ -214,6 +214,13 @@ def output_folder_problem(out: Path, key: str) -> str | None:
             pass
     except OSError as exc:
         return f"{key}: cannot write in {out} ({exc.strerror or exc})"
+    locked = output.lock_problem(out)
+    if locked:
+        return f"{key}: {locked}"
+    if output.in_use(out):
+        # its checkpoint, not yet in the manifest, is not the user's
+        return f"{key}: another run is writing to {out}: wait for it to end, or choose " \
+               "another folder"
     foreign = output.foreign_files(out)
     if foreign:
         return (f"{key}: {out} holds {', '.join(foreign)}, which no run of taichi_hsdem "
@@ -233,6 +240,10 @@ def _load(args) -> tuple:
         raise SceneError(f"--resume: give either a scene file ({args.scene}) or --resume "
                          f"{args.resume}, not both")
     path = Path(args.resume) / checkpoint.FILE
+    home = _home_of(Path(args.resume))
+    if output.in_use(home):
+        raise SceneError(f"--resume: another run is writing to {home}, and its checkpoint "
+                         "changes as it goes: wait for it to end, then --resume")
     try:
         header = checkpoint.read_header(path)
     except checkpoint.CheckpointError as exc:
@@ -385,6 +396,9 @@ def _main(args, interrupt) -> int:
     except output.FolderInUse as exc:
         print(f"{where}: {exc}: wait for it to end, or choose another folder",
               file=sys.stderr)
+        return EXIT_INVALID
+    except output.FolderUnusable as exc:
+        print(f"{where}: {exc}", file=sys.stderr)
         return EXIT_INVALID
     if (code in (EXIT_OK, interrupt.code) and resume_dir is not None and not continuing
             and resume_dir.resolve().name.startswith(output.STAGING_PREFIX)):

@@ -165,6 +165,38 @@ class FolderInUse(OSError):
     """Another run is writing the output folder."""
 
 
+class FolderUnusable(OSError):
+    """The output folder's lock cannot be taken (its path is not a file)."""
+
+
+def lock_problem(out: Path) -> str | None:
+    """Why ``out``'s lock cannot be taken (its path is a folder or some other
+    thing than a file), or None."""
+    path = Path(out) / LOCK
+    if os.path.lexists(path) and not path.is_file():
+        kind = "a folder" if path.is_dir() else "not a regular file"
+        return (f"{path} is {kind}, where runs of taichi_hsdem keep the folder's lock: "
+                "remove it, or choose another folder")
+    return None
+
+
+def in_use(out: Path) -> bool:
+    """Whether a run alive holds ``out``'s lock (is writing ``out``). Creates
+    nothing."""
+    import fcntl
+    try:
+        fh = open(Path(out) / LOCK, "rb")
+    except OSError:
+        return False
+    with fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError:
+            return True
+        fcntl.flock(fh, fcntl.LOCK_UN)
+    return False
+
+
 def _is_run_summary(path: Path) -> bool:
     """``summary.json`` of a run of this project (a folder from before manifests)."""
     try:
@@ -247,7 +279,14 @@ class Staging:
 
     def _take_lock(self):
         import fcntl
-        fh = open(self.out / LOCK, "a+")
+        problem = lock_problem(self.out)
+        if problem:
+            raise FolderUnusable(problem)
+        try:
+            fh = open(self.out / LOCK, "a+")
+        except OSError as exc:
+            raise FolderUnusable(f"cannot open the folder's lock {self.out / LOCK} "
+                                 f"({exc.strerror or exc})") from None
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:

@@ -285,3 +285,34 @@ def test_a_full_disk_is_one_line_and_leaves_the_earlier_result(tmp_path, capsys,
     err = capsys.readouterr().err
     assert "No space left on device" in err and err.count("\n") == 1, err
     assert snapshot(out) == before
+
+
+def test_resume_while_another_run_writes_the_folder_says_so(tmp_path, capsys):
+    """A live run's folder holds its checkpoint before any manifest names it: the
+    reason given is the run writing there, not a file of no run's, and also
+    before that run's first checkpoint."""
+    from taichi_hsdem import checkpoint
+    done, out = tmp_path / "done", tmp_path / "live"
+    assert main([HOURGLASS, "--out", str(done), *SHORT]) == 0
+    capsys.readouterr()
+    with output.Staging(out):                            # the live run
+        assert main(["--resume", str(out), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"--resume: another run is writing to {out}"), err
+        (out / checkpoint.FILE).write_bytes((done / checkpoint.FILE).read_bytes())
+        for args in (["--resume", str(out)], ["--resume", str(done), "--out", str(out)]):
+            assert main([*args, "--quiet"]) == 2
+            err = capsys.readouterr().err
+            assert "another run is writing" in err and "no run of taichi_hsdem" not in err
+            assert len(err.strip().splitlines()) == 1
+
+
+def test_a_lock_path_that_is_a_folder_is_refused_in_one_line(tmp_path, capsys):
+    out = tmp_path / "o"
+    (out / output.LOCK).mkdir(parents=True)
+    assert main([HOURGLASS, "--out", str(out), *SHORT]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == (f"--out: {out / output.LOCK} is a folder, where runs of "
+                           "taichi_hsdem keep the folder's lock: remove it, or choose "
+                           "another folder")
+    assert sorted(p.name for p in out.iterdir()) == [output.LOCK]
