@@ -44,7 +44,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", metavar="DIR",
                    help="continue the checkpoint in DIR (a run's output folder)")
     p.add_argument("--out", help="output folder (default: the scene's output.dir, runs/<name>/)")
-    p.add_argument("--arch", choices=("cpu", "gpu", "auto"), help="Taichi backend")
+    p.add_argument("--arch", choices=("cpu", "gpu", "auto", "cuda", "vulkan", "metal",
+                                      "opengl"),
+                   help="Taichi backend (gpu refuses a software driver; naming the backend "
+                        "runs on it anyway)")
     p.add_argument("--realizations", type=int, metavar="N", help="number of realizations")
     p.add_argument("--seed", type=int, metavar="S", help="seed of realization 0")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",

@@ -38,6 +38,7 @@ def build(scene: Scene, **options) -> Simulation:
     """``Simulation(scene, **options)``; a scene or backend that cannot work raises
     :class:`RunFailed` (``"invalid"``)."""
     try:
+        backend.refuse_software_gpu(scene.run.arch, scene.run.precision)
         return Simulation(scene, **options)
     except SceneError as exc:
         raise RunFailed("invalid", exc.problems) from None

@@ -50,6 +50,21 @@ def test_arch_gpu_on_a_software_driver_is_refused_naming_the_driver_and_the_cpu(
     assert "--arch cpu" in error and f"--arch {out['arch']}" in error
 
 
+def test_the_command_line_refuses_arch_gpu_on_a_software_driver(tmp_path):
+    # the whole command: exit 2, one line naming the driver and --arch cpu,
+    # nothing written; where the GPU is real or absent, not this test's case
+    out = tmp_path / "run"
+    proc = subprocess.run([sys.executable, "-m", "taichi_hsdem", str(ROOT / "scenes" /
+                           "vani_phi026.toml"), "--arch", "gpu", "--realizations", "1",
+                           "--no-video", "--set", "run.t_end=0.01", "--out", str(out)],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    if "software driver" not in proc.stderr:
+        pytest.skip(f"no software GPU driver here (exit {proc.returncode})")
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1 and "--arch cpu" in proc.stderr
+    assert not out.exists()
+
+
 def backend_software(device: str) -> bool:
     from taichi_hsdem import backend
     return backend._is_software(device)

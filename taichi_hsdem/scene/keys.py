@@ -113,8 +113,11 @@ class RunConfig(Config):
                                 1, ge=1)
     seed: int = keyfield("int", "seed of realization 0; realization k uses seed + k", 0,
                         ge=0)
-    arch: str = keyfield("choice", "Taichi backend (auto: a GPU when present)", "cpu",
-                        choices=("cpu", "gpu", "auto"))
+    arch: str = keyfield("choice", "Taichi backend: gpu the first GPU Taichi finds (a "
+                        "software driver refused), auto a GPU when present and fast (else "
+                        "the CPU), cuda/vulkan/metal/opengl that backend whatever its driver",
+                        "cpu", choices=("cpu", "gpu", "auto", "cuda", "vulkan", "metal",
+                                        "opengl"))
     precision: str = keyfield("choice", "floating point type of the kernels", "f64",
                              choices=("f64", "f32"))
     stepping: str = keyfield("choice", '"fused": many DEM steps per kernel launch, one '
