@@ -93,6 +93,20 @@ def arena_scene(particles, **kwargs):
     return gallery.arena_scene(particles, **kwargs)
 
 
+def load_tool(name):
+    """The module of ``tools/<name>.py`` (the tools are scripts, not a package),
+    registered in ``sys.modules`` so that its dataclasses find their module."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "tools" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
 make_sim = gallery.make_sim
 HeadOn = gallery.HeadOn
 

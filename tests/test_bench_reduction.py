@@ -1,20 +1,14 @@
 """tools/bench_reduction.py: its two contact kernels (per-body sums, atomic pair
 scatter) against an independent numpy evaluation of the same disk law, and the
 conservation laws a pair force obeys."""
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 
+from conftest import load_tool
+
 ROOT = Path(__file__).resolve().parents[1]
 EPS = np.finfo(np.float64).eps
-
-
-def _load(name):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _reference(pb, tool):
@@ -61,7 +55,7 @@ def _reference(pb, tool):
 
 
 def test_per_body_and_atomic_pair_kernels_give_the_reference_forces_and_conserve_momentum():
-    tool = _load("bench_reduction")
+    tool = load_tool("bench_reduction")
     from taichi_hsdem.backend import ti
     pb = tool.problem(200, seed=3)
     # A time step 30 times the benchmark's makes the tangential force k_s dt u_t

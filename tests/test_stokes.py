@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import load_tool
+
 ROOT = Path(__file__).resolve().parents[1]
 HAVE_NGSOLVE = importlib.util.find_spec("ngsolve") is not None
 needs_ngsolve = pytest.mark.skipif(
@@ -22,14 +24,7 @@ needs_ngsolve = pytest.mark.skipif(
     "pip install -e '.[stokes]'")
 
 
-def _load(name):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-sv = _load("stokes_validation")
+sv = load_tool("stokes_validation")
 sf = sv.stokes_fem
 
 

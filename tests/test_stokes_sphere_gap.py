@@ -7,24 +7,17 @@ compared with the CSV's row at d/H = 0.7.
 import importlib.resources
 import importlib.util
 import math
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
+from conftest import load_tool
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _load(name):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
-
-
-ssg = _load("stokes_sphere_gap")
+ssg = load_tool("stokes_sphere_gap")
 
 
 def _table():

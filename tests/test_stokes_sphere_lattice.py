@@ -8,24 +8,17 @@ import csv
 import importlib.resources
 import importlib.util
 import math
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
+from conftest import load_tool
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _load(name):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module        # dataclasses looks the module up while it loads
-    spec.loader.exec_module(module)
-    return module
-
-
-ssl = _load("stokes_sphere_lattice")
+ssl = load_tool("stokes_sphere_lattice")
 
 
 def _table():

@@ -9,7 +9,6 @@ take 0.05-1 s each; the whole file about 5 s.
 import importlib.resources
 import importlib.util
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -18,18 +17,12 @@ import pytest
 
 from taichi_hsdem import laws
 
+from conftest import load_tool
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _load(name):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
-
-
-sss = _load("stokes_sphere_spin")
+sss = load_tool("stokes_sphere_spin")
 
 
 def _table():

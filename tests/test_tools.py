@@ -1,22 +1,16 @@
 """The benchmark and study commands' argument handling (their runs are measured,
 not tested: see docs/performance.md)."""
-import importlib.util
 from pathlib import Path
 
 import pytest
 
+from conftest import load_tool
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _load(name):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_bench_case_names_carry_overrides():
-    bench = _load("bench")
+    bench = load_tool("bench")
     scene, ov = bench.overrides("disks-0.26-R10@fluid.workers=1@run.dt_safety=0.1", 0.02)
     assert scene.name == "vani_phi026.toml"
     assert ov[:3] == ["run.realizations=10", "run.t_end=0.02", "run.stop_at_clog=false"]
@@ -29,7 +23,7 @@ def test_bench_case_names_carry_overrides():
 
 
 def test_escapee_study_moves_one_knob_at_a_time_off_the_scene_defaults():
-    conv = _load("convergence")
+    conv = load_tool("convergence")
     from taichi_hsdem import load_scene
     from taichi_hsdem.resolve import resolve
     model = resolve(load_scene(ROOT / "scenes" / "vani_phi026.toml"))
@@ -44,7 +38,7 @@ def test_escapee_study_moves_one_knob_at_a_time_off_the_scene_defaults():
 
 
 def test_paper_settings_are_the_same_in_the_study_and_the_benchmark():
-    conv, bench = _load("convergence"), _load("bench")
+    conv, bench = load_tool("convergence"), load_tool("bench")
     assert conv.PAPER_POINT == {"run.dt": bench.PAPER_DT,
                                 "fluid.update_interval": bench.PAPER_FLUID_EVERY}
     assert bench.PAPER_DT == 3.75e-7 and bench.PAPER_FLUID_EVERY == 10000  # Zhou et al.
@@ -54,7 +48,7 @@ def test_interval_study_points_are_the_cells_they_are_labelled_with(monkeypatch)
     """The interval study gives its points as steps (so that a folder stays the same
     run whatever the default): each must be, to a step per half cell, what "auto"
     resolves to at that many cells per solve, and the longest must be accepted."""
-    conv = _load("convergence")
+    conv = load_tool("convergence")
     from taichi_hsdem import load_scene
     from taichi_hsdem import resolve as resolve_module
     from taichi_hsdem.resolve import domain
@@ -79,7 +73,7 @@ def test_interval_study_points_are_the_cells_they_are_labelled_with(monkeypatch)
 def test_grid_study_points_are_the_cells_they_are_labelled_with():
     """The grid study's points hold the default and solve as often as it does:
     the interval it gives is what "auto" resolves to on the default grid."""
-    conv = _load("convergence")
+    conv = load_tool("convergence")
     from taichi_hsdem import load_scene
     from taichi_hsdem.resolve import FLUID_CELLS_PER_D, resolve
     vani = ROOT / "scenes" / "vani_phi026.toml"
@@ -98,7 +92,7 @@ def test_solve_study_labels_its_base_point_with_the_scene_defaults():
     """The solve study's first point is the vani scene as shipped: the values it
     is labelled with (and measured against) are what the scene resolves to, and no
     other point repeats them."""
-    conv = _load("convergence")
+    conv = load_tool("convergence")
     from taichi_hsdem import load_scene
     from taichi_hsdem.resolve import resolve
     model = resolve(load_scene(ROOT / "scenes" / "vani_phi026.toml", ["run.realizations=1"]))
@@ -112,7 +106,7 @@ def test_solve_study_labels_its_base_point_with_the_scene_defaults():
 def test_sweep_studies_take_set_overrides_at_every_point(tmp_path, capsys):
     # --set reaches every point's resolved scene (e.g. the fixed-obstacle model of
     # the README's earlier studies); a bad key stops before anything is written
-    conv = _load("convergence")
+    conv = load_tool("convergence")
     out = tmp_path / "conv"
     assert conv.main(["interval", "--quick", "--realizations", "1", "--out", str(out),
                       "--set", "fluid.particle_flux=false"]) == 0
@@ -132,7 +126,7 @@ def test_sweep_studies_take_set_overrides_at_every_point(tmp_path, capsys):
 
 
 def test_timestep_study_quick_writes_its_chart(tmp_path):
-    conv = _load("convergence")
+    conv = load_tool("convergence")
     rows, csv_path, png = conv.timestep_study(tmp_path, quick=True)
     assert csv_path.is_file() and png.is_file()
     assert [r[0] for r in rows] == [0.02, 0.15, 0.3]
@@ -154,7 +148,7 @@ def test_escape_windows_pool_escapes_over_unclogged_time(tmp_path):
     (tmp_path / "realizations.csv").write_text(
         "label,phi,seed,escapees,clogged,t_clog,t_stop,status,reason\n"
         "a,0.1,0,3,0,,3.0,ok,\na,0.1,1,1,1,1.0,1.0,ok,\n")
-    tool = _load("escape_windows")
+    tool = load_tool("escape_windows")
     (row,) = tool.windows_table(tmp_path, [(0.0, 2.0)])
     assert row[:5] == (0.1, 0.0, 2.0, 3, 3.0)
     assert row[5] == 1.0 and row[6] == 0.5          # theory: 0.25 escapees at 0.5 s
@@ -169,7 +163,7 @@ def test_neck_study_sets_the_width_from_the_diameter_and_tabulates(tmp_path):
     """tools/neck_study.py: each point's resolved neck is W/d times the largest
     equivalent diameter (vani: d = 140 um), and the table has a row per point."""
     from taichi_hsdem.scene import read_toml
-    neck = _load("neck_study")
+    neck = load_tool("neck_study")
     out = tmp_path / "neck"
     assert neck.main(["--wd", "1.3", "--realizations", "1", "--t-end", "0.01",
                       "--out", str(out), "--quiet"]) == 0
@@ -208,7 +202,7 @@ def test_sweep_changes_compares_points_paired_by_seed(tmp_path):
     interval is the wider; a point with no stable realization says so; a missing
     reference exits 2."""
     import json
-    tool = _load("sweep_changes")
+    tool = load_tool("sweep_changes")
 
     def point(name, escapees, status="ok"):
         (tmp_path / name).mkdir()
@@ -242,7 +236,7 @@ def test_sweep_changes_says_nothing_clogged_as_a_lower_bound(tmp_path):
     "+nan [-inf, +inf]")."""
     import json
     from taichi_hsdem.stats import summarize
-    tool = _load("sweep_changes")
+    tool = load_tool("sweep_changes")
     for name, clogged in (("base", True), ("never", False)):
         esc = [3, 7, 1, 12, 5]
         st = summarize(esc, [clogged] * 5)
@@ -264,7 +258,7 @@ def test_throat_study_reports_an_ensemble_that_never_clogged():
     (stats.summarize gives None): "-", not a traceback; one with clogs gives its
     estimate and 1/<s>."""
     from taichi_hsdem import stats
-    tool = _load("throat_study")
+    tool = load_tool("throat_study")
     none = stats.summarize([5, 7, 9], [False, False, False])
     assert none["mean_escapees"] is None
     assert tool._estimate(none).startswith("- [") and tool._rate(none) == "-"
@@ -293,7 +287,7 @@ def test_profile_case_splits_a_run_and_sets_its_solve_against_the_floor():
     assert len(kernels) == 3 and kernels == sorted(kernels, reverse=True)
     m = re.search(r"(\d+) cells x ([\d.]+) iterations x (\d+) B at 10 GB/s = ([\d.]+) ms", out)
     cells, iters, per_cell, floor_ms = int(m[1]), float(m[2]), int(m[3]), float(m[4])
-    assert cells == 175 * 61 and per_cell == _load("profile_case").BYTES_PER_CELL_ITERATION
+    assert cells == 175 * 61 and per_cell == load_tool("profile_case").BYTES_PER_CELL_ITERATION
     assert floor_ms == pytest.approx(1e3 * cells * iters * per_cell / 10e9, rel=0.01, abs=0.06)
     bad = subprocess.run([sys.executable, str(tool), "disks-0.17-R1", "--top", "0"],
                          capture_output=True, text=True, timeout=60, cwd=ROOT)

@@ -26,12 +26,10 @@ Exit status: 0 done; 2 bad arguments or an invalid scene (one line each).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import pathlib
 import sys
-import tempfile
 import tomllib
 
 from taichi_hsdem.exits import EXIT_INVALID, EXIT_OK, Parser

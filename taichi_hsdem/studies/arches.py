@@ -38,7 +38,6 @@ it broke, or that it held) and writes it to its folder's ``arches.csv``.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import heapq
 import json
