@@ -1,5 +1,7 @@
 """The benchmark and study commands' argument handling (their runs are measured,
 not tested: see docs/performance.md)."""
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -292,3 +294,30 @@ def test_profile_case_splits_a_run_and_sets_its_solve_against_the_floor():
     bad = subprocess.run([sys.executable, str(tool), "disks-0.17-R1", "--top", "0"],
                          capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert bad.returncode == 2 and "--top must be at least 1" in bad.stderr
+
+
+def test_arch_lifetime_places_the_symmetric_arch_on_the_walls():
+    # each outer disk a radius (less the 0.01 d opening) inside its 45-degree
+    # wall and two radii (plus the opening) from the middle one, at beta from
+    # the cross-stream direction
+    import math
+    from taichi_hsdem import load_scene
+    from taichi_hsdem.resolve import resolve
+    tool = load_tool("arch_lifetime")
+    d = 140e-6
+    g = resolve(load_scene(ROOT / "scenes" / "vani_phi026.toml",
+                           [f"geometry.constriction_width={2.2 * d}"])).geometry
+    mid, up, low = tool.arch_positions(g, 45.0, d, 20.0)
+    a, e = d / 2, tool.OPENING * d / 2
+    c = g.constriction_x0 + g.constriction_width / 2      # upper wall: x + y = c
+    assert (c - up[0] - up[1]) / math.sqrt(2) == pytest.approx(a + e / math.sqrt(2), rel=1e-9)
+    assert up[1] == -low[1] and up[0] == low[0] and mid[1] == 0.0
+    gap = math.hypot(up[0] - mid[0], up[1] - mid[1])
+    assert 2 * a < gap < 2 * a + 3 * e
+    assert math.degrees(math.atan2(up[0] - mid[0], up[1])) == pytest.approx(20.0, abs=0.5)
+
+
+def test_arch_lifetime_refuses_a_bad_angle():
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "arch_lifetime.py"),
+                           "--beta", "75"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "--beta" in proc.stderr
