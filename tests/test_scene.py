@@ -404,8 +404,8 @@ def test_unknown_keys_suggest_the_closest(tmp_path):
     ("run.realizations", 0, "run.realizations: must be >= 1, got 0"),
     ("run.realizations", 2.0, "run.realizations: expected an integer >= 1, got "
                               "number 2.0"),
-    ("run.arch", "tpu", "run.arch: must be one of 'cpu', 'gpu', 'auto', got \"tpu\" "
-                          "(did you mean 'gpu'?)"),
+    ("run.arch", "tpu", "run.arch: must be one of 'cpu', 'gpu', 'auto', 'cuda', 'vulkan', "
+                        "'metal', 'opengl', got \"tpu\" (did you mean 'gpu'?)"),
     ("run.precision", "f16", "run.precision: must be one of 'f64', 'f32', got "
                                  "\"f16\" (did you mean 'f64'?)"),
     ("run.stop_at_clog", 1, "run.stop_at_clog: expected true or false, got integer 1"),
