@@ -503,10 +503,7 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
         "history_overflows": rs.history_overflows,
         "contact_path": "disk" if model.all_disks else "level-set",
         "auto": dict(model.notes),
-        "final_state": [
-            {"x": st["x"][r].tolist(), "theta": st["theta"][r].tolist(),
-             "alive": st["alive"][r].tolist(), "species": st["species"].tolist()}
-            for r in range(len(rs.results))],
+        # the final state is Result.final, written to final_state.npz, not here
     }
     if throats.network:
         summary["network"] = network_summary(rs, throats, real, escaped, st)

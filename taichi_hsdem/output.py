@@ -1,4 +1,4 @@
-"""Writing a run's results: summary.json, escapees.csv, arches.csv,
+"""Writing a run's results: summary.json, final_state.npz, escapees.csv, arches.csv,
 scene.resolved.toml, the checkpoint, the plots, video.mp4 and the ParaView series.
 
 A run only ever replaces or removes files that runs of this project wrote in its
@@ -65,6 +65,72 @@ def write_resolved_scene(scene: Scene, out: Path, notes: dict | None = None):
 
 def write_summary(summary: dict, out: Path):
     atomic_write(out / "summary.json", json.dumps(json_safe(summary), indent=1) + "\n")
+
+
+#: The final states' file: numpy arrays, realization first.
+FINAL_STATE = "final_state.npz"
+#: Its arrays (R realizations, N bodies): ``x`` (R, N, 2) m, ``theta`` (R, N) rad,
+#: ``v`` (R, N, 2) m/s, ``omega`` (R, N) rad/s, ``alive`` (R, N) bool, ``species``
+#: (N,) each body's species (the summary's ``species`` order), ``seed`` (R,).
+FINAL_STATE_ARRAYS = ("x", "theta", "v", "omega", "alive", "species", "seed")
+
+
+def write_final_state(result, out: Path):
+    """``final_state.npz``: the run's end state (``Result.final``) and each
+    realization's seed (:data:`FINAL_STATE_ARRAYS`); realization ``r`` is row ``r``
+    of every per-realization array, as in summary.json's ``realizations``."""
+    st = result.final
+    arrays = {k: np.asarray(st[k]) for k in FINAL_STATE_ARRAYS if k != "seed"}
+    arrays["seed"] = np.array([int(r["seed"]) for r in result.summary["realizations"]],
+                              dtype=np.int64)
+    path = Path(out) / FINAL_STATE
+    tmp = path.with_name(path.name + ".part")
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+    os.replace(tmp, path)
+
+
+class NoFinalState(ValueError):
+    """A folder holds no final state (no final_state.npz, and no ``final_state`` in
+    a summary.json written before the file existed)."""
+
+
+def read_final_state(folder: Path, summary: dict | None = None) -> dict:
+    """The final state of the run (or sweep point) in ``folder`` as numpy arrays
+    (:data:`FINAL_STATE_ARRAYS`). A folder written before ``final_state.npz``
+    existed falls back to its summary.json's ``final_state`` (``summary``, read
+    when not given): there only ``x``, ``theta``, ``alive``, ``species`` and
+    ``seed`` (no velocities). Raises :class:`NoFinalState` when neither is there."""
+    folder = Path(folder)
+    path = folder / FINAL_STATE
+    if path.is_file():
+        try:
+            with np.load(path) as data:
+                return {k: data[k] for k in data.files}
+        except (OSError, ValueError, KeyError) as exc:
+            raise NoFinalState(f"{path}: unreadable ({exc})") from None
+    if summary is None:
+        try:
+            summary = json.loads((folder / "summary.json").read_text())
+        except (OSError, ValueError):
+            summary = {}
+    old = summary.get("final_state") if isinstance(summary, dict) else None
+    if not old:
+        raise NoFinalState(f"{folder}: no {FINAL_STATE} (nor a final_state in its "
+                           "summary.json)")
+    try:
+        out = {"x": np.array([f["x"] for f in old], dtype=float).reshape(len(old), -1, 2),
+               "alive": np.array([f["alive"] for f in old], dtype=bool)}
+        if all("theta" in f for f in old):
+            out["theta"] = np.array([f["theta"] for f in old], dtype=float)
+        if "species" in old[0]:
+            out["species"] = np.asarray(old[0]["species"], dtype=np.int64)
+        out["seed"] = np.array([int(r["seed"]) for r in summary.get("realizations", [])],
+                               dtype=np.int64)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise NoFinalState(f"{folder}/summary.json: an unreadable final_state ({exc})") \
+            from None
+    return out
 
 
 def write_flow(flow, statuses, out: Path):
@@ -138,10 +204,10 @@ def write_arches(rows, statuses, out: Path):
 
 
 #: Files (and folders) a run writes into its output folder.
-RESULT_FILES = ("scene.resolved.toml", "escapees.csv", "arches.csv", "flow.csv", "throats.csv",
-                "network.csv", "summary.json", "video.mp4", "escapees.png", "pmf.png",
-                "permeability.png", "throats_clogged.png", "clog_map.png", "series.pvd", "vtk",
-                checkpoint.FILE)
+RESULT_FILES = ("scene.resolved.toml", FINAL_STATE, "escapees.csv", "arches.csv", "flow.csv",
+                "throats.csv", "network.csv", "summary.json", "video.mp4", "escapees.png",
+                "pmf.png", "permeability.png", "throats_clogged.png", "clog_map.png",
+                "series.pvd", "vtk", checkpoint.FILE)
 #: The plots a run may draw (report.py).
 PLOTS = ("escapees.png", "pmf.png", "permeability.png", "throats_clogged.png", "clog_map.png")
 #: The list of the files the runs of this project wrote in a folder: only these
@@ -314,18 +380,19 @@ class Staging:
         return self.tmp / name
 
     def publish(self, result, extra: list[str]) -> list[str]:
-        """Write the scene, the series, the arches and the summary beside the files
-        ``extra`` already staged (the checkpoint among them when it waited here),
-        then move them all into the folder (summary last) and record them in the
-        manifest; returns the names written. The files an earlier run wrote and
-        this one does not are removed (a run continued in place too: its result is
-        the whole run's). Nothing the runs of this project did not write is
-        touched."""
+        """Write the scene, the series, the arches, the final state and the summary
+        beside the files ``extra`` already staged (the checkpoint among them when it
+        waited here), then move them all into the folder (summary last) and record
+        them in the manifest; returns the names written. The files an earlier run
+        wrote and this one does not are removed (a run continued in place too: its
+        result is the whole run's). Nothing the runs of this project did not write
+        is touched."""
         statuses = [r["status"] for r in result.summary["realizations"]]
         write_resolved_scene(result.scene, self.tmp, result.notes)
         write_series(result.series, statuses, self.tmp)
         write_arches(result.arches, statuses, self.tmp)
-        names = ["scene.resolved.toml", "escapees.csv", "arches.csv", *extra]
+        write_final_state(result, self.tmp)
+        names = ["scene.resolved.toml", "escapees.csv", "arches.csv", FINAL_STATE, *extra]
         if result.flow:
             write_flow(result.flow, statuses, self.tmp)
             names.insert(2, "flow.csv")

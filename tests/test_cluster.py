@@ -5,6 +5,7 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("distributed", reason="the cluster extra brings dask.distributed")
@@ -18,9 +19,14 @@ COMMON = {"run.t_end": 1.5, "run.realizations": 2, "feed.region": [14.0, 22.0]}
 
 
 def _results(out):
-    keep = ("realizations", "final_state", "steps", "statistics")
-    return {p.name: {k: json.loads((p / "summary.json").read_text())[k] for k in keep}
-            for p in sorted(out.iterdir()) if (p / "summary.json").is_file()}
+    keep = ("realizations", "steps", "statistics")
+    out_ = {}
+    for p in sorted(out.iterdir()):
+        if (p / "summary.json").is_file():
+            out_[p.name] = {k: json.loads((p / "summary.json").read_text())[k] for k in keep}
+            with np.load(p / "final_state.npz") as f:     # the point's final state
+                out_[p.name]["final_state"] = {k: f[k].tolist() for k in f.files}
+    return out_
 
 
 def test_sweep_on_a_local_cluster_gives_the_in_process_results(tmp_path, monkeypatch):

@@ -183,11 +183,21 @@ def test_neck_study_sets_the_width_from_the_diameter_and_tabulates(tmp_path):
     from taichi_hsdem.scene import load_scene
     g = _geometry(load_scene(point / "scene.resolved.toml").geometry)
     d, x0 = 140e-6, g.constriction_x0
+    import numpy as np
     summary = json.loads((point / "summary.json").read_text())
+    assert "final_state" not in summary
     summary["realizations"][0]["clogged"] = True
-    summary["final_state"] = [{"x": [[x0 - 0.4 * d, 0.0], [x0 - 1.5 * d, 0.0],
-                                     [x0 - 5 * d, 0.0], [x0 + 0.2 * d, 0.0]],
-                               "alive": [1, 1, 1, 0]}]
+    (point / "summary.json").write_text(json.dumps(summary))
+    x = [[x0 - 0.4 * d, 0.0], [x0 - 1.5 * d, 0.0], [x0 - 5 * d, 0.0], [x0 + 0.2 * d, 0.0]]
+    alive = [1, 1, 1, 0]
+    with np.load(point / "final_state.npz") as f:
+        arrays = {k: f[k] for k in f.files}
+    arrays["x"], arrays["alive"] = np.array([x]), np.array([alive], dtype=bool)
+    np.savez(point / "final_state.npz", **arrays)
+    assert neck.arch_positions(point) == [pytest.approx(0.4, rel=1e-9)]
+    # a point written before final_state.npz: its summary's final_state
+    (point / "final_state.npz").unlink()
+    summary["final_state"] = [{"x": x, "alive": alive}]
     (point / "summary.json").write_text(json.dumps(summary))
     assert neck.arch_positions(point) == [pytest.approx(0.4, rel=1e-9)]
     summary["realizations"][0]["clogged"] = False     # only clogged realizations count

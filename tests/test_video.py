@@ -152,8 +152,7 @@ def test_hourglass_video_is_h264_yuv420p_with_the_scene_frames(hourglass_run):
 def test_hourglass_last_frame_draws_the_final_state(hourglass_run):
     _, out, _ = hourglass_run
     pm = PixelMap(out)
-    summary = json.loads((out / "summary.json").read_text())
-    final = summary["final_state"][pm.scene.output.video_realization]
+    final = final_of(out, pm.scene.output.video_realization)
     _, frames = read_video(out / "video.mp4")
     last = frames[-1]
     wall = render.WALL_GREY
@@ -214,6 +213,14 @@ width = 1920
 """
 
 
+def final_of(out, r):
+    """Realization ``r``'s final state in the run folder ``out`` (final_state.npz)."""
+    with np.load(out / "final_state.npz") as f:
+        state = {k: f[k][r] for k in ("x", "theta", "alive")}
+        state["species"] = f["species"]
+    return state
+
+
 @pytest.fixture(scope="module")
 def squares_run(tmp_path_factory):
     return video_run(tmp_path_factory, "squares", "squares10.toml", scene_text=SQUARES)
@@ -222,8 +229,7 @@ def squares_run(tmp_path_factory):
 def test_squares_are_drawn_turned_by_their_theta(squares_run):
     work, out, _ = squares_run
     pm = PixelMap(out)
-    summary = json.loads((out / "summary.json").read_text())
-    final = summary["final_state"][0]
+    final = final_of(out, 0)
     meta, frames = read_video(out / "video.mp4")
     assert len(frames) == 12
     last = frames[-1]

@@ -65,22 +65,26 @@ def arch_positions(folder: pathlib.Path) -> list[float]:
     """How far upstream of the neck's entrance, in diameters of the largest
     species, the most downstream particle within 4 diameters of it (or in the
     neck) sat, in every clogged realization of a finished point (its
-    ``summary.json`` and resolved scene)."""
+    ``summary.json``, ``final_state.npz`` and resolved scene; a point written
+    before the npz existed: its summary's ``final_state``; none: no positions)."""
     import json
 
-    import numpy as np
-
+    from taichi_hsdem.output import NoFinalState, read_final_state
     from taichi_hsdem.resolve.domain import _geometry
     from taichi_hsdem.scene import load_scene
     summary = json.loads((folder / "summary.json").read_text())
+    try:
+        fin = read_final_state(folder, summary)
+    except NoFinalState:
+        return []
     scene = load_scene(folder / "scene.resolved.toml")
     g = _geometry(scene.geometry)
     d = max(sp.d_eq() for sp in scene.particles)
     out = []
-    for res, fin in zip(summary["realizations"], summary.get("final_state") or []):
-        if not res.get("clogged"):
+    for r, res in enumerate(summary["realizations"]):
+        if not res.get("clogged") or r >= len(fin["x"]):
             continue
-        x = np.asarray(fin["x"], dtype=float)[np.asarray(fin["alive"], dtype=bool)]
+        x = fin["x"][r][fin["alive"][r]]
         near = x[(x[:, 0] > g.constriction_x0 - 4 * d) & (x[:, 0] < g.constriction_x1 + d)]
         if len(near):
             out.append(float(g.constriction_x0 - near[:, 0].max()) / d)

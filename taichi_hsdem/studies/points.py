@@ -252,10 +252,13 @@ def run_point(point: Point, realizations: int, batch: int | None = None, log=Non
             seen.add(key)
             if res.summary["realizations"][r]["status"] == "ok":
                 out.series.append((res.summary["realizations"][r]["seed"], float(t), int(s)))
-        for rr, fs in zip(res.summary["realizations"], res.summary["final_state"]):
+        fin = res.final
+        for r, rr in enumerate(res.summary["realizations"]):
             out.rows.append({k: rr.get(k) for k in ("seed", "escapees", "clogged", "t_clog",
                                                     "t_stop", "status", "reason")})
-            out.finals[int(rr["seed"])] = fs
+            out.finals[int(rr["seed"])] = {
+                "x": fin["x"][r].tolist(), "theta": fin["theta"][r].tolist(),
+                "alive": fin["alive"][r].tolist(), "species": fin["species"].tolist()}
         del sim, res
         done += n
         if log is not None and done < realizations:

@@ -4,10 +4,10 @@ A *sweep* runs one base scene at several *points*, each a set of dotted override
 (``{"particles.friction": 0.4, "run.realizations": 10}``, the keys of ``--set``),
 in one process: Taichi is initialised once and its kernels compiled once for all
 points. Every point writes its own folder, named after its overrides
-(``particles.friction=0.4``), with ``summary.json``, ``escapees.csv`` and
-``scene.resolved.toml`` as a single run does; the sweep writes ``sweep.csv`` (the
-clogging statistics of every point, one row each) and ``index.json`` (folder ->
-overrides). A sweep is resumable: a point whose folder holds a ``summary.json``
+(``particles.friction=0.4``), with ``summary.json``, ``final_state.npz``,
+``escapees.csv`` and ``scene.resolved.toml`` as a single run does; the sweep
+writes ``sweep.csv`` (the clogging statistics of every point, one row each) and
+``index.json`` (folder -> overrides). A sweep is resumable: a point whose folder holds a ``summary.json``
 of the same scene (base file, common and point overrides, compared as the
 validated scene text) run by the same code (a digest of the package's sources) is
 skipped; a folder without one, or with another scene's or code's, is run again.
@@ -503,12 +503,14 @@ def run_point(scene: Scene, point: Mapping, common: Mapping, base: str, where: s
     """Run one point of a sweep into folder ``where`` (here or on a cluster worker):
     ``(status, summary as written or None, message)``."""
     # the simulator loads Taichi (about a second): only once there is something to run
-    from ..output import write_resolved_scene, write_series, write_summary
+    from ..output import FINAL_STATE, write_final_state, write_resolved_scene, write_series, \
+        write_summary
     from ..runner import RunFailed, build, execute, unstable_message
     where = Path(where)
     where.mkdir(parents=True, exist_ok=True)
     # A result of other overrides left here must not pass for this point's.
     (where / SUMMARY).unlink(missing_ok=True)
+    (where / FINAL_STATE).unlink(missing_ok=True)
     try:
         sim = build(scene)
     except RunFailed as error:
@@ -523,6 +525,7 @@ def run_point(scene: Scene, point: Mapping, common: Mapping, base: str, where: s
                         "scene_sha256": key}
     statuses = [r["status"] for r in summary["realizations"]]
     write_series(result.series, statuses, where)
+    write_final_state(result, where)
     write_summary(summary, where)  # last: its presence marks the point finished
     summary = json.loads((where / SUMMARY).read_text())  # as later sweeps read it
     message = unstable_message(result)
