@@ -25,9 +25,10 @@ import time
 from pathlib import Path
 
 from . import checkpoint, output
-from .exits import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, Parser
+from .exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
 from .scene import SceneError, load_scene
 from .scene.load import path_length_problem
+from .stop import Stopped, describe
 from .scene.toml import parse_toml
 
 # Keys a resumed run may change: its end and what it writes.
@@ -130,9 +131,7 @@ class _Interrupt:
     def what(self) -> str:
         """How the stop reads in a message: "interrupted" (Ctrl-C) or "stopped by
         SIGTERM"."""
-        if self.signum in (None, signal.SIGINT):
-            return "interrupted"
-        return f"stopped by {signal.Signals(self.signum).name}"
+        return describe(self.signum)
 
     def _handler(self, signum, frame):
         if self.signum is None:
@@ -144,7 +143,7 @@ class _Interrupt:
                 os._exit(self.code)
             os._exit(self.outcome if self.outcome is not None else self.code)
         if self.phase == self.SETUP or (self.phase == self.RUN and self.requested):
-            raise KeyboardInterrupt
+            raise Stopped(signum)
         self.requested = True
 
     def __enter__(self):
@@ -170,6 +169,14 @@ class _Interrupt:
 
     def __call__(self) -> bool:
         return self.requested
+
+    def start_run(self):
+        """Set-up is over: from here a signal asks the run to stop. A signal during
+        set-up whose exception a library swallowed (Taichi's decorators catch every
+        exception while they inspect the caller) stops here, as set-up."""
+        if self.signum is not None:
+            raise Stopped(self.signum)
+        self.phase = self.RUN
 
 
 def _say(quiet, msg):
@@ -317,10 +324,11 @@ def _command(argv) -> int | None:
     try:
         module = importlib.import_module(f".studies.{COMMANDS[argv[0]]}", __package__)
         return module.main(list(argv[1:]), prog=f"python -m taichi_hsdem {argv[0]}")
-    except KeyboardInterrupt:
-        print(f"{argv[0]} interrupted: what finished before is kept (a rerun into the "
-              "same folder goes on from there)", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print(f"{argv[0]} {describe(signum)}: what finished before is kept (a rerun "
+              "into the same folder goes on from there)", file=sys.stderr)
+        return 128 + int(signum)
 
 
 def main(argv=None) -> int:
@@ -443,7 +451,7 @@ def _run(args, scene, resume_from, staged, interrupt) -> int:
                                resume_dir=None if resume_from is None else resume_from.parent)
     progress = _Progress(args.quiet, sim.t, sc.run.t_end)
     saver = output.CheckpointClock(sim, staged, sc.output.checkpoint_every)
-    interrupt.phase = interrupt.RUN
+    interrupt.start_run()
     try:
         result = execute(sim, progress=progress, on_frame=pictures.on_frame,
                          frame_times=pictures.frame_times, stop=interrupt,

@@ -2,8 +2,8 @@
 
 0 success; 1 the run failed (what to change is said); 2 the scene, the arguments
 or the output folder are invalid (one line per problem, no traceback, nothing
-written); 130 interrupted (Ctrl-C); a run (not a study) stopped by SIGTERM exits
-143 and by SIGHUP 129 (128 + the signal's number), as after Ctrl-C.
+written); 130 interrupted (Ctrl-C); a run or a study stopped by SIGTERM exits 143
+and by SIGHUP 129 (128 + the signal's number), as after Ctrl-C.
 """
 from __future__ import annotations
 

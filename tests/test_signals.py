@@ -4,6 +4,7 @@ nothing is written; while the results are written they all are; after the run's
 end the line says the result is complete. Each exits 128 + the signal's number
 with one line, and leaves no lock and no staging folder behind."""
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -172,3 +173,82 @@ def test_sighup_ignored_by_nohup_stays_ignored_and_the_handlers_are_restored():
         assert signal.getsignal(signal.SIGINT) == previous[signal.SIGINT]
     finally:
         signal.signal(signal.SIGHUP, previous[signal.SIGHUP])
+
+
+@pytest.mark.parametrize("stop", ["Stopped", "KeyboardInterrupt"])
+def test_a_stop_inside_code_an_extension_evaluates_keeps_the_exit_status(tmp_path, stop):
+    """CPython, under ``python -m``, ends with SIGINT (status -2) whatever the program
+    returned once a plain KeyboardInterrupt was raised inside code that C evaluates
+    (``PyRun_String``: Taichi's set-up does this), even if caught: the cause of runs
+    stopped during set-up exiting -2. The signal handlers raise :class:`Stopped`,
+    which CPython does not remember; the plain class shows the trap is real."""
+    package = tmp_path / "stopper"
+    package.mkdir()
+    (package / "__main__.py").write_text(textwrap.dedent(f"""
+        import ctypes, signal, sys
+        from taichi_hsdem.stop import Stopped
+        def handler(signum, frame):
+            raise {stop}() if {stop!r} == "KeyboardInterrupt" else Stopped(signum)
+        signal.signal(signal.SIGTERM, handler)
+        run = ctypes.pythonapi.PyRun_String
+        run.restype = ctypes.py_object
+        run.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.py_object, ctypes.py_object]
+        try:
+            run(b"import os, signal, time\\nos.kill(os.getpid(), signal.SIGTERM)\\n"
+                b"time.sleep(5)", 257, {{}}, {{}})
+        except KeyboardInterrupt:
+            sys.exit(143)
+        sys.exit(1)
+        """))
+    proc = subprocess.run([sys.executable, "-m", "stopper"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(
+                              [str(ROOT), os.environ.get("PYTHONPATH", "")])})
+    assert proc.returncode == (143 if stop == "Stopped" else -signal.SIGINT), proc.stderr
+
+
+def test_sigterm_stops_a_study_with_its_status_and_one_line(tmp_path):
+    sweep_file = tmp_path / "s.toml"
+    sweep_file.write_text(f'scene = "{Path(HOURGLASS).as_posix()}"\n[common]\n'
+                          '"run.t_end" = 50\n[grid]\n"particles.friction" = [0.2, 0.4]\n')
+    out = tmp_path / "sweep"
+    proc = subprocess.Popen([sys.executable, "-m", "taichi_hsdem", "sweep", str(sweep_file),
+                             "--out", str(out), "--quiet"],
+                            cwd=tmp_path, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and not out.is_dir():
+        time.sleep(0.05)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines() == [
+        "sweep stopped by SIGTERM: what finished before is kept (a rerun into the same "
+        "folder goes on from there)"], err
+
+
+def test_a_set_up_signal_a_library_swallows_still_stops_the_run(tmp_path):
+    """Taichi's decorators catch every exception (KeyboardInterrupt too) while they
+    inspect their caller, so a signal landing there raised nothing: the run must
+    still stop before it starts, as during set-up (a run of 50 s went on to its end
+    with exit 0 before)."""
+    out = tmp_path / "o"
+    proc = _python(f"""
+        import os, signal, sys, time
+        from taichi_hsdem import cli, runner
+        build = runner.build
+        def build_swallowing_a_signal(*args, **kwargs):
+            try:                                  # as taichi.lang.kernel_impl does
+                os.kill(os.getpid(), signal.SIGHUP)
+                time.sleep(5)
+            except:
+                pass
+            return build(*args, **kwargs)
+        runner.build = build_swallowing_a_signal
+        sys.argv = ["taichi_hsdem", {HOURGLASS!r}, "--out", {str(out)!r},
+                    "--set", "run.t_end=50", "--quiet"]
+        sys.exit(cli.main())
+        """, tmp_path)
+    assert proc.returncode == 129, proc.stderr
+    assert proc.stderr.strip() == "stopped by SIGHUP during set-up: nothing was written"
+    assert not out.exists()
