@@ -30,17 +30,19 @@ def __getattr__(name):
     raise AttributeError(f"module 'taichi_hsdem' has no attribute {name!r}")
 
 
-def run(scene, overrides=(), progress=None):
+def run(scene, overrides=(), progress=None, on_phase=None):
     """Load (if needed) and run a scene; return its :class:`Result`.
 
-    ``scene`` is a :class:`Scene`, a path to a TOML file or a dict.
+    ``scene`` is a :class:`Scene`, a path to a TOML file or a dict. ``progress(t,
+    t_end)`` is called as the run goes on, ``on_phase(what)`` as each phase of the
+    set-up begins (10-30 s on a first run, while Taichi compiles), e.g. ``print``.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
         raise TypeError("overrides apply to a path or dict; use load_scene(...) for a Scene")
     from .simulation import Simulation
-    return Simulation(scene).run(progress=progress)
+    return Simulation(scene, on_phase=on_phase).run(progress=progress)
 
 
 __all__ = ["Scene", "SceneError", "load_scene", "scene_to_toml", "Simulation", "Result",

@@ -21,6 +21,7 @@ import shutil
 import signal
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -93,6 +94,58 @@ class _Progress:
     def close(self):
         if self.bar is not None:
             self.bar.close()
+
+
+class _SetupClock:
+    """The set-up's word: a first line at once (before Taichi loads), then, while a
+    phase of the set-up (or the first chunk of steps, where the step kernels
+    compile) has run for 5 s or more, a line every 5 s saying which phase and how
+    long so far. A thread prints them: Taichi's compiler holds Python's lock at
+    times, so a line may come a few seconds late. Nothing when quiet."""
+
+    EVERY = 5.0
+
+    def __init__(self, quiet: bool, first_line: str):
+        self.quiet = quiet
+        self.t0 = time.perf_counter()
+        self.what = "loading"
+        self.since = self.t0
+        self.write = None           # a progress bar's write, once there is one
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._thread = None
+        if not quiet:
+            print(first_line, file=sys.stderr, flush=True)
+            self._thread = threading.Thread(target=self._beat, name="set-up clock",
+                                            daemon=True)
+            self._thread.start()
+
+    def phase(self, what: str):
+        """The set-up has begun ``what``."""
+        with self._lock:
+            self.what, self.since = what, time.perf_counter()
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def _beat(self):
+        while not self._stop.wait(self.EVERY):
+            with self._lock:
+                now = time.perf_counter()
+                if now - self.since < self.EVERY - 0.05:
+                    continue
+                line = f"set-up: {self.what} ... ({now - self.t0:.0f} s so far)"
+                if self.write is not None:
+                    self.write(line)
+                else:
+                    print(line, file=sys.stderr, flush=True)
+
+    def stop(self, *args):
+        """The set-up is over (also usable as the run's first progress call)."""
+        if not self._stop.is_set():
+            self._stop.set()
+            if self._thread is not None:
+                self._thread.join()
 
 
 class _Interrupt:
@@ -420,13 +473,26 @@ def _main(args, interrupt) -> int:
 
 def _run(args, scene, resume_from, staged, interrupt) -> int:
     """Build, run and publish into ``staged``; the exit status."""
+    clock = _SetupClock(args.quiet, f"{scene.name}: setting up"
+                        + (f" to continue {resume_from.parent}" if resume_from else "")
+                        + " (Taichi compiles its kernels on a first run: 10-30 s; "
+                          "later runs read them from its cache) ...")
+    try:
+        return _run_timed(args, scene, resume_from, staged, interrupt, clock)
+    finally:
+        clock.stop()
+
+
+def _run_timed(args, scene, resume_from, staged, interrupt, clock) -> int:
     out = staged.out
     # The simulator loads Taichi (about a second): only once the scene is valid.
+    clock.phase("loading Taichi")
     from . import backend
     from .runner import UNSTABLE_HINT, RunFailed, build, execute
     try:
-        sim = build(scene, place_particles=resume_from is None)
+        sim = build(scene, place_particles=resume_from is None, on_phase=clock.phase)
         if resume_from is not None:
+            clock.phase("reading the checkpoint, first pressure solve")
             checkpoint.restore(sim, resume_from)
     except RunFailed as exc:
         for line in exc.lines:
@@ -442,7 +508,8 @@ def _run(args, scene, resume_from, staged, interrupt) -> int:
          f"{sim.model.species[0].shape.name if len(sim.model.species) == 1 else 'mixed'} "
          f"({'disk' if sim.model.all_disks else 'level-set'} contacts), arch {sim.arch}"
          + (f" ({why})" if why else "")
-         + (f", resumed at t = {sim.t:.4g} s" if resume_from else "") + f" -> {out}")
+         + (f", resumed at t = {sim.t:.4g} s" if resume_from else "")
+         + f", set up in {clock.elapsed():.1f} s -> {out}")
     if staged.checkpoint_path.parent != out:
         _say(args.quiet, f"{out} holds an earlier result, kept until this run ends; "
              f"this run's checkpoints wait in {staged.tmp} (--resume it if the run is "
@@ -451,9 +518,16 @@ def _run(args, scene, resume_from, staged, interrupt) -> int:
                                resume_dir=None if resume_from is None else resume_from.parent)
     progress = _Progress(args.quiet, sim.t, sc.run.t_end)
     saver = output.CheckpointClock(sim, staged, sc.output.checkpoint_every)
+    if progress.bar is not None:
+        clock.write = lambda line: progress.bar.write(line, file=sys.stderr)
+    clock.phase("compiling the step kernels (the first chunk of steps)")
+
+    def first_progress(t, t_end):
+        clock.stop()
+        progress(t, t_end)
     interrupt.start_run()
     try:
-        result = execute(sim, progress=progress, on_frame=pictures.on_frame,
+        result = execute(sim, progress=first_progress, on_frame=pictures.on_frame,
                          frame_times=pictures.frame_times, stop=interrupt,
                          on_chunk=saver)
     except RunFailed as exc:

@@ -60,6 +60,11 @@ class Simulation:
     neighbor_capacities : (int, int)
         Initial bodies per cell and neighbours per body of the neighbour lists
         (each doubles whenever a rebuild overflows it).
+    on_phase : callable or None
+        ``on_phase(what)`` is called as each phase of the set-up begins, with what
+        it does in a few words ("starting Taichi (cpu)", "placing the particles",
+        ...): the set-up takes 10-30 s on a first run (Taichi compiles its kernels;
+        later runs read them from Taichi's cache).
 
     Attributes
     ----------
@@ -83,8 +88,11 @@ class Simulation:
     """
 
     def __init__(self, scene: Scene, place_particles: bool = True,
-                 neighbor_capacities: tuple[int, int] = (8, 16)):
+                 neighbor_capacities: tuple[int, int] = (8, 16), on_phase=None):
+        phase = on_phase if on_phase is not None else (lambda what: None)
+        phase(f"starting Taichi ({scene.run.arch})")
         self.arch = backend.init(scene.run.arch, scene.run.precision)
+        phase("resolving the scene (shapes' level sets, walls, time step)")
         self.model: Model = resolve(scene, self.arch)
         m = self.model
         self.scene = m.scene
@@ -123,13 +131,15 @@ class Simulation:
                                    and self.scene.fluid.force_update == "step")
         S = len(m.species)
         self._species_onehot = np.eye(S, dtype=np.int64)[self.particles.species_np]
+        phase("finding the throats")
         self.throats = throats_of(m.geometry)
         self.census = observables.ArchCensus.of(m)
         self.run_state = RunState.start([self.scene.run.seed + k for k in range(R)], N, S,
                                         len(self.throats))
         self.interrupted = False    # whether the last run() was stopped early
         if place_particles:
-            self._place_all()
+            phase("placing the particles")
+            self._place_all(phase)
 
     @property
     def check_every(self) -> int:
@@ -157,7 +167,7 @@ class Simulation:
         return self.run_state.results
 
     # ------------------------------------------------------------------ set-up
-    def _place_all(self):
+    def _place_all(self, phase=None):
         m = self.model
         shapes = [s.shape for s in m.species]
         xs = np.zeros((self.R, self.N, 2))
@@ -178,6 +188,9 @@ class Simulation:
                     m.feed_region, gap=0.0, existing=existing)
             except PlacementError as exc:
                 raise SceneError([f"{self.scene.source}: particles: {exc}"]) from None
+        if phase is not None:
+            phase("compiling the contact and fluid kernels, first pressure solve"
+                  if self.fluid is not None else "compiling the contact kernels")
         self.set_state(xs, ths)
 
     def _to_device(self, array, value, shape, dtype=None):

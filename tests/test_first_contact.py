@@ -5,6 +5,7 @@ arch formed, held for clog.window from then."""
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -61,7 +62,9 @@ def test_the_command_line_refuses_arch_gpu_on_a_software_driver(tmp_path):
     if "software driver" not in proc.stderr:
         pytest.skip(f"no software GPU driver here (exit {proc.returncode})")
     assert proc.returncode == 2
-    assert len(proc.stderr.strip().splitlines()) == 1 and "--arch cpu" in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert lines[0].startswith("vani_phi026: setting up (")       # the progress line
+    assert len(lines) == 2 and "--arch cpu" in lines[1]            # one problem, one line
     assert not out.exists()
 
 
@@ -134,3 +137,46 @@ def test_a_sweep_point_where_nothing_clogged_says_a_lower_bound(tmp_path):
         (line,) = list(csv.DictReader(fh))
     assert line["mean_escapees"] == ""
     assert float(line["mean_escapees_lower_bound"]) == st["mean_escapees_lower_bound"]
+
+
+HOURGLASS = ROOT / "scenes" / "hourglass24.toml"
+
+
+def test_the_set_up_phases_reach_the_api_in_order():
+    phases = []
+    sim = Simulation(load_scene(HOURGLASS, ["run.realizations=1"]), on_phase=phases.append)
+    assert sim.R == 1
+    assert [p.split(" ")[0] for p in phases] == ["starting", "resolving", "finding",
+                                                 "placing", "compiling"], phases
+    assert phases[0] == "starting Taichi (cpu)" or phases[0].startswith("starting Taichi (")
+
+
+def test_a_run_says_it_is_setting_up_at_once_and_how_a_slow_set_up_goes(
+        tmp_path, capsys, monkeypatch):
+    """The first line comes before Taichi is loaded (within 2 s of the command);
+    a phase of the set-up that takes longer than the clock's interval (5 s; 0.2 s
+    here) gets a line saying which phase and how long so far."""
+    from taichi_hsdem import cli, runner
+    monkeypatch.setattr(cli._SetupClock, "EVERY", 0.2)
+    seen = {}
+    build = runner.build
+
+    def slow_build(scene, **options):
+        seen["before_build"] = capsys.readouterr().err
+        options["on_phase"]("placing the particles")
+        time.sleep(1.0)
+        return build(scene, **options)
+    monkeypatch.setattr(runner, "build", slow_build)
+    out = tmp_path / "o"
+    assert cli.main([str(HOURGLASS), "--out", str(out), "--realizations", "1",
+                     "--set", "run.t_end=0.2", "--no-video"]) == 0
+    first = seen["before_build"].strip().splitlines()
+    assert len(first) == 1 and first[0].startswith("hourglass24: setting up ("), first
+    err = capsys.readouterr().err.splitlines()
+    beats = [ln for ln in err if ln.startswith("set-up: placing the particles ... (")]
+    assert beats and beats[0].endswith("s so far)"), err
+    info = next(k for k, ln in enumerate(err) if ln.startswith("hourglass24: 1 realization"))
+    assert err.index(beats[0]) < info and ", set up in " in err[info]
+    # the clock stops with the set-up: nothing of it after the run's end
+    assert not any(ln.startswith("set-up:") for ln in err[info + 1:]
+                   if not ln.startswith("set-up: compiling the step kernels"))
