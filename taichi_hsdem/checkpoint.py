@@ -23,6 +23,7 @@ Examples
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -127,19 +128,44 @@ def read_header(path) -> dict:
     state), every field checked (types, ranges, the scene inside valid);
     :class:`CheckpointError` when the file is missing, damaged or not one."""
     path = Path(path)
+    with _opened(path) as data:
+        return _header_of(data, path)
+
+
+@contextlib.contextmanager
+def _opened(path: Path):
+    """The checkpoint at ``path`` as an open ``NpzFile``, read from one open file:
+    a run that replaces the file meanwhile (its next checkpoint) cannot mix the
+    header of one with the arrays of the other."""
     if not path.exists():
         raise CheckpointError(f"{path}: no checkpoint here (a run leaves checkpoint.npz in "
                               "its output folder)")
     if not path.is_file():
         raise CheckpointError(f"{path}: not a regular file")
     try:
-        if not zipfile.is_zipfile(path):    # np.load would read it as .npy or pickle
-            raise CheckpointError(f"{path}: not a readable checkpoint (not a complete .npz "
-                                  "archive: cut short, or another kind of file)")
-        with np.load(path, allow_pickle=False) as data:
-            header = json.loads(bytes(data["header"]).decode())
-    except CheckpointError:
-        raise
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise CheckpointError(f"{path}: not a readable checkpoint ({_reason(exc)})") from None
+    with fh:
+        try:
+            if not zipfile.is_zipfile(fh):    # np.load would read it as .npy or pickle
+                raise CheckpointError(f"{path}: not a readable checkpoint (not a complete "
+                                      ".npz archive: cut short, or another kind of file)")
+            fh.seek(0)
+            data = np.load(fh, allow_pickle=False)
+        except CheckpointError:
+            raise
+        except (*_UNREADABLE, RecursionError) as exc:
+            raise CheckpointError(f"{path}: not a readable checkpoint ({_reason(exc)})") \
+                from None
+        with data:
+            yield data
+
+
+def _header_of(data, path: Path) -> dict:
+    """The checked header of the open checkpoint ``data`` (see :func:`read_header`)."""
+    try:
+        header = json.loads(bytes(data["header"]).decode())
     except (*_UNREADABLE, RecursionError) as exc:
         raise CheckpointError(f"{path}: not a readable checkpoint ({_reason(exc)})") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT:
@@ -328,11 +354,12 @@ def restore(sim, path) -> dict:
     scene); returns its header. Everything is read and checked before ``sim`` is
     touched: :class:`CheckpointError` leaves it as it was."""
     path = Path(path)
-    header = read_header(path)
-    check_continuable(header, sim.scene, path)
-    host = header["host"]
-    _check_progress(host, sim, path)
-    arrays = _read_arrays(sim, path, host)
+    with _opened(path) as data:
+        header = _header_of(data, path)
+        check_continuable(header, sim.scene, path)
+        host = header["host"]
+        _check_progress(host, sim, path)
+        arrays = _read_arrays(sim, data, path, host)
     if sim.fluid is not None and not isinstance(host.get("fluid"), dict):
         raise CheckpointError(f"{path}: host.fluid: missing, though the scene has a fluid")
     run_state = RunState.from_arrays(host, {name: arrays[HOST + name]
@@ -394,7 +421,7 @@ _FINITE = {f"bodies.{k}" for k in ("x", "theta", "v", "omega", "force", "torque"
     "host.last_escape_t", "batch.max_overlap"}
 
 
-def _read_arrays(sim, path, host) -> dict:
+def _read_arrays(sim, data, path, host) -> dict:
     """Every array of the checkpoint, each checked against what ``sim`` holds: present,
     of its dtype and shape (the neighbour lists at the saved capacities), finite where
     a value must be, and indices inside the batch."""
@@ -414,22 +441,21 @@ def _read_arrays(sim, path, host) -> dict:
     optional = {"fluid.kappa_solved": expected.get("fluid.kappa")}
     arrays = {}
     try:
-        with np.load(path, allow_pickle=False) as data:
-            extra = set(data.files) - set(expected) - set(optional) - {"header"}
-            if extra:
-                raise CheckpointError(f"{path}: arrays {sorted(extra)} are not of this scene's "
-                                      "set-up")
-            for name in [*expected, *(k for k in optional if k in data.files)]:
-                ref = expected.get(name, optional.get(name))
-                if ref is None:
-                    raise CheckpointError(f"{path}: {name} is not of this scene's set-up")
-                if name not in data.files:
-                    raise CheckpointError(f"{path}: {name}: missing")
-                value = data[name]
-                if value.dtype != ref.dtype or value.shape != ref.shape:
-                    raise CheckpointError(f"{path}: {name}: {value.dtype} {value.shape}, not "
-                                          f"the scene's {ref.dtype} {ref.shape}")
-                arrays[name] = value
+        extra = set(data.files) - set(expected) - set(optional) - {"header"}
+        if extra:
+            raise CheckpointError(f"{path}: arrays {sorted(extra)} are not of this scene's "
+                                  "set-up")
+        for name in [*expected, *(k for k in optional if k in data.files)]:
+            ref = expected.get(name, optional.get(name))
+            if ref is None:
+                raise CheckpointError(f"{path}: {name} is not of this scene's set-up")
+            if name not in data.files:
+                raise CheckpointError(f"{path}: {name}: missing")
+            value = data[name]
+            if value.dtype != ref.dtype or value.shape != ref.shape:
+                raise CheckpointError(f"{path}: {name}: {value.dtype} {value.shape}, not "
+                                      f"the scene's {ref.dtype} {ref.shape}")
+            arrays[name] = value
     except CheckpointError:
         raise
     except (*_UNREADABLE, RecursionError) as exc:

@@ -249,6 +249,12 @@ def _overrides(args) -> list[str]:
         overrides.append(f"output.video={'true' if args.video else 'false'}")
     if args.vtk:
         overrides.append("output.vtk=true")
+    given = {text.partition("=")[0].strip(): text for text in args.set}
+    for flag, key in (("--arch", "run.arch"), ("--realizations", "run.realizations"),
+                      ("--seed", "run.seed"), ("--video/--no-video", "output.video"),
+                      ("--vtk", "output.vtk")):
+        if key in given and any(o.startswith(f"{key}=") for o in overrides[len(args.set):]):
+            raise SceneError(f"--set {given[key]} and {flag} both set {key}: give one")
     return overrides
 
 
@@ -285,6 +291,12 @@ def output_folder_problem(out: Path, key: str) -> str | None:
         return f"{key}: another run is writing to {out}: wait for it to end, or choose " \
                "another folder"
     foreign = output.foreign_files(out)
+    damaged = output.manifest_problem(out) if foreign else None
+    if damaged:
+        return (f"{key}: {out / output.MANIFEST}, the record of the files runs of "
+                f"taichi_hsdem wrote there, is {damaged}; so {', '.join(foreign)} may be "
+                "your own files: choose a new or empty folder, or move them (or remove "
+                "the record if they are a run's)")
     if foreign:
         return (f"{key}: {out} holds {', '.join(foreign)}, which no run of taichi_hsdem "
                 "wrote there and which a run would replace or remove: choose a new or "

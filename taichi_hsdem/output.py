@@ -290,6 +290,23 @@ def owned_files(out: Path) -> set[str]:
     return set()
 
 
+def manifest_problem(out: Path) -> str | None:
+    """Why the manifest in ``out`` cannot be read (damaged, unreadable), or None
+    (read, or absent)."""
+    path = Path(out) / MANIFEST
+    try:
+        data = json.loads(path.read_text())
+        if not isinstance(data, dict) or not isinstance(data.get("files"), list):
+            return "it does not list files"
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        return f"unreadable: {exc.strerror or exc}"
+    except ValueError as exc:
+        return f"damaged: {exc}"
+    return None
+
+
 def foreign_files(out: Path) -> list[str]:
     """Names in ``out`` that a run may write (or remove) but that no run of this
     project wrote: a run refuses such a folder rather than lose the user's files."""

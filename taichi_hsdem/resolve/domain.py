@@ -163,7 +163,8 @@ def _check_steps(res: _Resolution, scene: Scene, dt: float) -> None:
                   "follows the driving pressure or flow rate)")
         res.bad(key, f"{why} {dt:.3g} s{driver} would take {steps:.3g} steps to reach "
                 f"t_end = {t_end:g} s, more than the {limits.MAX_STEPS:.0e} a run can finish; "
-                f"lower run.t_end, or soften the contacts / the driving")
+                + ("lower run.t_end, or raise run.dt" if scene.run.dt != "auto" else
+                   "lower run.t_end, or soften the contacts / the driving"))
 
 
 def _memory_parts(scene: Scene, species: list[Species], all_disks: bool, wall_h: float,
