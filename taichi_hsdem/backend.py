@@ -38,6 +38,10 @@ class BackendError(RuntimeError):
     """The requested backend cannot be used in this process."""
 
 
+class AddressSpaceLimit(BackendError):
+    """Taichi could not reserve the address space it starts with (``ulimit -v``)."""
+
+
 def init(arch: str = "cpu", precision: str = "f64") -> str:
     """Initialise Taichi once; return the name of the backend actually used.
 
@@ -192,20 +196,20 @@ def _ti_init(target, fp, name_device: bool = False):
     threads = {} if thread_share() is None else {"cpu_max_num_threads": thread_share()}
     settings = dict(arch=target, default_fp=fp, default_ip=ti.i32, offline_cache=True,
                     fast_math=False, **threads)
-    if not name_device:
-        with contextlib.redirect_stdout(io.StringIO()):
-            ti.init(log_level=ti.ERROR, **settings)
-        return ti.lang.impl.current_cfg().arch.name
-    # the device's name is in Taichi's (C++) trace log only: read it from the
-    # process's own stdout and stderr while ti.init runs
+    # Taichi's C++ log goes to the process's own stdout and stderr: read it from
+    # there while ti.init runs (the device's name is in its trace log only; a
+    # failure is said in our words; errors of a start that worked are passed on).
     with tempfile.TemporaryFile(mode="w+b") as log, contextlib.redirect_stdout(io.StringIO()):
         sys.stdout.flush()
         sys.stderr.flush()
         saved = [os.dup(1), os.dup(2)]
+        failed = None
         try:
             os.dup2(log.fileno(), 1)
             os.dup2(log.fileno(), 2)
-            ti.init(log_level=ti.TRACE, **settings)
+            ti.init(log_level=ti.TRACE if name_device else ti.ERROR, **settings)
+        except RuntimeError as exc:
+            failed = exc
         finally:
             os.dup2(saved[0], 1)
             os.dup2(saved[1], 2)
@@ -214,6 +218,20 @@ def _ti_init(target, fp, name_device: bool = False):
             ti.set_logging_level(ti.ERROR)
         log.seek(0)
         text = log.read().decode("utf-8", "replace")
+    reserve = re.search(r"Virtual memory allocation \((\d+) B\) failed", str(failed or ""))
+    if reserve:
+        raise AddressSpaceLimit(
+            f"Taichi could not reserve the {int(reserve.group(1)) / 2**30:.3g} GiB of address "
+            "space it starts with: this process's virtual memory is limited (ulimit -v, "
+            "or a job's memory limit on virtual memory); raise the limit to a few GiB more "
+            "than the run needs (a limit on resident memory, such as Slurm's --mem, does "
+            "not stop it)") from None
+    if failed is not None:
+        raise failed
+    if not name_device:
+        if text.strip():
+            print(text.rstrip(), file=sys.stderr)
+        return ti.lang.impl.current_cfg().arch.name
     found = re.search(r"Found Vulkan Device \d+ \((.*)\)\s*$", text, re.MULTILINE)
     return ti.lang.impl.current_cfg().arch.name, (found.group(1) if found else None)
 

@@ -42,6 +42,8 @@ def build(scene: Scene, **options) -> Simulation:
         return Simulation(scene, **options)
     except SceneError as exc:
         raise RunFailed("invalid", exc.problems) from None
+    except backend.AddressSpaceLimit as exc:
+        raise RunFailed("invalid", [str(exc)]) from None
     except backend.BackendError as exc:
         raise RunFailed("invalid", [f"{scene.source}: run.arch: {exc}"]) from None
 

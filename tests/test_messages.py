@@ -93,3 +93,32 @@ def test_a_checkpoint_is_read_from_one_open_file(tmp_path, monkeypatch):
     restored = checkpoint.restore(sim, path)
     assert restored["host"]["t"] == header["host"]["t"] == sim.t
     assert np.array_equal(sim.bodies.x.to_numpy(), x_first)
+
+
+def test_a_limited_address_space_is_said_in_one_line(tmp_path):
+    """Under ``ulimit -v`` Taichi's first reservation fails (a RuntimeError from
+    its C++ memory pool, seen at 1.5 GB): one line naming the limit, exit 2, not
+    "internal error"; here Taichi's failure is made to happen."""
+    import subprocess
+    import sys
+    import textwrap
+    out = tmp_path / "o"
+    code = textwrap.dedent(f"""
+        import sys
+        import taichi as ti
+        def failing_init(**kwargs):
+            print("[E host_memory_pool.cpp] Virtual memory allocation (1073741824 B) "
+                  "failed.", file=sys.stderr)
+            raise RuntimeError("[host_memory_pool.cpp:allocate_raw_memory@62] Virtual "
+                               "memory allocation (1073741824 B) failed.")
+        ti.init = failing_init
+        from taichi_hsdem.cli import main
+        sys.exit(main([{HOURGLASS!r}, "--out", {str(out)!r}, "--quiet"]))
+        """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300, cwd=tmp_path)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, proc.stderr
+    assert len(lines) == 1 and lines[0].startswith(
+        "Taichi could not reserve the 1 GiB of address space it starts with"), lines
+    assert "ulimit -v" in lines[0] and not out.exists()
