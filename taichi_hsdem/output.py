@@ -219,14 +219,6 @@ LOCK = ".taichi_hsdem.lock"
 STAGING_PREFIX = ".incomplete-"
 
 
-def estimate_text(mean, ci) -> str:
-    """``<s>`` with its interval for a message: ``12.3 [8.1, 17.9]``."""
-    def num(v):
-        return "-" if v is None else ("inf" if v == math.inf else f"{v:.3g}")
-    lo, hi = ci if ci else (None, None)
-    return f"{num(mean)} [{num(lo)}, {num(hi)}]"
-
-
 class FolderInUse(OSError):
     """Another run is writing the output folder."""
 

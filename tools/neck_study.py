@@ -97,7 +97,7 @@ def table(rows: list[dict], ratios: list[float],
     and where the clogs held (``where``: :func:`arch_positions` of each point)."""
     import numpy as np
 
-    from taichi_hsdem.studies import fmt
+    from taichi_hsdem.stats import estimate_text
     where = where or [[] for _ in ratios]
     csv = ["wd,mean_escapees,ci_lo,ci_hi,never_clogged,n,n_unstable,status,"
            "arch_upstream_median,arch_upstream_q1,arch_upstream_q3"]
@@ -110,12 +110,10 @@ def table(rows: list[dict], ratios: list[float],
         csv.append(",".join("" if v is None else str(v) for v in (
             wd, row["mean_escapees"], lo, hi, never, row["n"], row["n_unstable"],
             row["status"], *q)))
-        # no clog at all: the mean is unbounded, its lower limit is what was seen
-        mean = (f"> {fmt(lo)}" if row["mean_escapees"] is None and lo is not None
-                else fmt(row["mean_escapees"]))
+        # no clog at all: the one-sided lower bound, as every message says it
+        mean = estimate_text(row["mean_escapees"], (lo, hi))
         held = f"{q[0]:.2f} ({q[1]:.2f}-{q[2]:.2f})" if w else "-"
-        md.append(f"| {wd:g} | {mean} [{fmt(lo)}, {fmt(hi)}] | {never} of {row['n']} "
-                  f"| {held} |")
+        md.append(f"| {wd:g} | {mean} | {never} of {row['n']} | {held} |")
     return "\n".join(csv) + "\n", "\n".join(md) + "\n"
 
 
