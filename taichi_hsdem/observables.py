@@ -164,20 +164,30 @@ def observe_throats(rs: RunState, model, throats, st, r) -> None:
     """Passages and clogs of every throat of realization ``r`` at a check
     (:func:`~taichi_hsdem.geometry.throats.observe`, from ``rs.check_x`` to
     ``st``): a throat blocked at rest with nothing through it for clog.window has
-    clogged, since it was first found so after its latest passage."""
-    passed, static = observe(throats, rs.check_x[r], rs.check_alive[r],
-                             st["x"][r], st["v"][r], st["alive"][r],
-                             rest_speed(model, rs.u_ref, r), model.d_max)
+    clogged, since it was first found so after its latest passage.
+
+    The window counts from the latest passage or, before any passage, from when
+    particles were first found at rest there: t = 0 is no event (counting from it
+    clogged a throat first reached after clog.window at the first check that
+    found it at rest, held for no time). A throat found holding no particle
+    (none reached it, or they left it without passing) starts its rest afresh:
+    the particles that stop there next are a new arch."""
+    passed, static, reached = observe(throats, rs.check_x[r], rs.check_alive[r],
+                                      st["x"][r], st["v"][r], st["alive"][r],
+                                      rest_speed(model, rs.u_ref, r), model.d_max)
     t = rs.t
     went = passed > 0
     rs.throat_passages[r] += passed
     rs.throat_last_passage_t[r, went] = t
-    rs.throat_static_t[r, went] = np.nan
+    rs.throat_static_t[r, went | ~reached] = np.nan
     rs.throat_t_clog[r, went] = np.nan
     first = static & np.isnan(rs.throat_static_t[r])
     rs.throat_static_t[r, first] = t
-    clog = (static & np.isnan(rs.throat_t_clog[r])
-            & (t - rs.throat_last_passage_t[r] >= model.scene.clog.window))
+    since = np.where(rs.throat_passages[r] > 0, rs.throat_last_passage_t[r],
+                     rs.throat_static_t[r])
+    with np.errstate(invalid="ignore"):
+        held = t - since >= model.scene.clog.window     # NaN (never at rest): False
+    clog = static & np.isnan(rs.throat_t_clog[r]) & held
     rs.throat_t_clog[r, clog] = rs.throat_static_t[r, clog]
 
 

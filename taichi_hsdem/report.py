@@ -23,6 +23,10 @@ With several throats (a micromodel, :func:`plot_network`):
   particles);
 * ``throats_clogged.png``: the fraction of throats clogged against the particles
   injected (``network.csv``);
+* in both, each realization faint behind their mean (:func:`ensemble_mean`), in
+  which a clogged realization that stopped is kept at its final state (dotted
+  past its end): it stays clogged, so the mean never reads as unclogging where
+  one stopped;
 * ``clog_map.png``: the geometry with each throat drawn across its gap, coloured
   by the share of realizations in which it is clogged at the end.
 
@@ -243,21 +247,14 @@ def plot_network(result, folder: Path, throats, geometry, empty) -> dict:
     si = result.scene.units == "SI"
     drawn = {}
     # K(t) / K0
+    held = {r for r in stable if real[r]["clogged"]}
     if empty is not None and result.flow:
         ratio = {r: v for r, v in permeability_ratio(result.flow, empty).items() if r in stable}
         fig, ax = plt.subplots(figsize=(6.4, 4.2))
-        for r, (t, k) in sorted(ratio.items()):
-            ax.plot(t, k, lw=0.8, alpha=0.6, color="0.5")
         if ratio:
-            grid = np.linspace(0.0, max(float(t.max()) for t, _ in ratio.values()), 200)
-            # a realization's curve ends where it stopped: the mean over those still in
-            curves = [np.where(grid <= t.max(), np.interp(grid, t, k), np.nan)
-                      for t, k in ratio.values()]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mean = np.nanmean(np.array(curves), axis=0)
-            ax.plot(grid, mean, color="C0", lw=2,
-                    label=f"mean over those of the {len(ratio)} realization(s) still running")
+            grid, mean, top = ensemble_mean(ratio, held)
+            draw_faint(ax, ratio, held, top)
+            ax.plot(grid, mean, color="C0", lw=2, label=ensemble_label(len(ratio), held & set(ratio)))
             ax.legend(fontsize=8)
         ax.axhline(1.0, color="k", lw=0.6, ls=":")
         ax.set_ylim(bottom=0.0)
@@ -277,23 +274,12 @@ def plot_network(result, folder: Path, throats, geometry, empty) -> dict:
         if r in stable:
             per.setdefault(r, []).append((n, c / T))
     if per:
+        per = {r: tuple(np.array(rows, dtype=float).T) for r, rows in per.items()}
         fig, ax = plt.subplots(figsize=(6.4, 4.2))
-        for r, rows in sorted(per.items()):
-            n, f = np.array(rows).T
-            ax.step(n, f, where="post", lw=0.8, alpha=0.6, color="0.5")
-        top = max(max(n for n, _ in rows) for rows in per.values())
-        grid = np.linspace(0.0, top, 200)
-        curves = []
-        for rows in per.values():
-            n, f = np.array(rows).T
-            at = np.searchsorted(n, grid, side="right") - 1
-            # a realization's curve ends where it stopped: the mean over those still in
-            curves.append(np.where((at >= 0) & (grid <= n.max()), f[np.maximum(at, 0)], np.nan))
-        with warnings.catch_warnings():      # past every realization's end: NaN
-            warnings.simplefilter("ignore", RuntimeWarning)
-            mean = np.nanmean(np.array(curves), axis=0)
-        ax.plot(grid, mean, color="C3", lw=2,
-                label=f"mean over those of the {len(curves)} realization(s) still running")
+        grid, mean, top = ensemble_mean(per, held, step=True)
+        draw_faint(ax, per, held, top, step=True)
+        ax.step(grid, mean, where="post", color="C3", lw=2,
+                label=ensemble_label(len(per), held & set(per)))
         ax.set_xlabel("particles injected")
         ax.set_ylabel(f"fraction of the {T} throats clogged")
         ax.set_ylim(0.0, 1.0)
@@ -312,6 +298,63 @@ def plot_network(result, folder: Path, throats, geometry, empty) -> dict:
     drawn.update(draw_clog_map(plt, folder / "clog_map.png", geometry, throats, share,
                                len(stable), result.scene.name, si))
     return drawn
+
+
+def ensemble_mean(per, held, step=False):
+    """The mean curve over realizations ``per`` (``{r: (x, y)}`` arrays, x
+    increasing), each realization of ``held`` (the clogged ones, stopped) kept at
+    its final value past its end: a clogged realization stays clogged, so the mean
+    never reads as unclogging where one stopped. It runs to the end of the
+    shortest realization not held (all of them reach it; none is extrapolated),
+    or of the longest when all are held. ``step``: the curves are steps (a value
+    holds until the next sample), else piecewise linear. Returns ``(grid, mean,
+    top)``, ``top`` the grid's end.
+
+    Examples
+    --------
+    >>> per = {0: (np.array([0.0, 0.5]), np.array([1.0, 0.2])),
+    ...        1: (np.array([0.0, 1.0]), np.array([1.0, 0.6]))}
+    >>> grid, mean, top = ensemble_mean(per, held={0})
+    >>> top, round(float(mean[-1]), 3)       # realization 0 held at 0.2, not dropped
+    (1.0, 0.4)
+    """
+    ends = {r: float(x[-1]) for r, (x, _) in per.items()}
+    open_ends = [e for r, e in ends.items() if r not in held]
+    top = min(open_ends) if open_ends else max(ends.values())
+    start = min(float(x[0]) for x, _ in per.values())
+    grid = np.linspace(start, top, 200) if top > start else np.array([start])
+    curves = []
+    for x, y in per.values():
+        if step:
+            at = np.searchsorted(x, grid, side="right") - 1
+            curves.append(np.where(at >= 0, y[np.maximum(at, 0)], np.nan))
+        else:                # np.interp holds the last value past the end
+            curves.append(np.where(grid >= x[0], np.interp(grid, x, y), np.nan))
+    with warnings.catch_warnings():          # before every realization's first sample: NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean = np.nanmean(np.array(curves), axis=0)
+    return grid, mean, top
+
+
+def draw_faint(ax, per, held, top, step=False):
+    """Each realization's curve of ``per`` (``{r: (x, y)}``) faint, behind the mean;
+    a held one (:func:`ensemble_mean`) goes on dotted at its final value to ``top``."""
+    for r, (x, y) in sorted(per.items()):
+        if step:
+            ax.step(x, y, where="post", lw=0.7, alpha=0.35, color="0.4")
+        else:
+            ax.plot(x, y, lw=0.7, alpha=0.35, color="0.4")
+        if r in held and x[-1] < top:
+            ax.plot([x[-1], top], [y[-1], y[-1]], lw=0.7, alpha=0.35, color="0.4", ls=":")
+
+
+def ensemble_label(n, held) -> str:
+    """The mean curve's legend: over how many realizations, and how many of them
+    are held at their final state (:func:`ensemble_mean`)."""
+    label = f"mean of {n} realization(s)"
+    if held:
+        label += f"; the {len(held)} clogged held at their final state (dotted)"
+    return label
 
 
 def draw_clog_map(plt, path, geometry, throats, share, n_real, name, si) -> dict:

@@ -127,7 +127,8 @@ class RunState:
     throat_passages, throat_last_passage_t, throat_static_t, throat_t_clog : (R, T)
         Per throat: centres that crossed its segment between two checks, the time
         of the latest, the first check since that found it blocked at rest (NaN:
-        none), and its clog time (NaN: open; a passage reopens it).
+        none, or the throat was found empty since), and its clog time (NaN: open;
+        a passage reopens it).
     check_x, check_alive : (R, N, 2), (R, N)
         Positions and alive flags at the latest check (or ``set_state``).
     """

@@ -399,3 +399,50 @@ def test_obstacle_vertices_have_their_own_budget():
     with pytest.raises(SceneError, match=r"geometry.obstacles: the obstacles have 54000 "
                                          r"vertices, more than the 50000"):
         load_scene(poly)
+
+
+def test_a_throat_first_reached_late_clogs_only_after_its_window_at_rest():
+    """Issue 46, item 7: before any passage the throat's window counts from when
+    particles came to rest there, not from t = 0: two disks put at rest across a
+    gap at t = 0.3 (> clog.window) clog it a window later, with t_clog the first
+    check that found them, not at once."""
+    sim = make_sim(MICRO)
+    x, y = 6.0 + 1.5 * 3.5, sim.throats.midpoints[_throat(sim, 11.25, -1.75), 1]
+    k = _throat(sim, x, y)
+    far = [[2.0, -1.0], [2.0, 1.0], [2.0, 0.0]]           # at rest, at no throat
+    sim.set_state([far])
+    window = MICRO["clog"]["window"]
+    sim.run(stop=lambda: sim.t > 1.5 * window)
+    assert not np.isfinite(sim.run_state.throat_static_t).any()
+    t_put = sim.t
+    sim.set_state([[[x - 0.9, y - 0.52], [x - 0.9, y + 0.52], [2.0, 0.0]]])
+    sim.run(stop=lambda: sim.t > t_put + 0.5 * window)
+    assert not np.isfinite(sim.run_state.throat_t_clog).any()     # held for half a window
+    t_found = sim.run_state.throat_static_t[0, k]
+    assert t_put < t_found <= t_put + sim.check_every * sim.dt * 1.000001
+    sim.run()
+    assert np.flatnonzero(np.isfinite(sim.run_state.throat_t_clog[0])).tolist() == [k]
+    assert sim.run_state.throat_t_clog[0, k] == t_found
+    assert sim.run_state.throat_passages.sum() == 0
+
+
+def test_a_throat_left_without_a_passage_starts_its_rest_afresh():
+    """Particles at rest at a throat that are moved away (no passage) leave no
+    rest time behind: the next ones to stop there start the window again."""
+    sim = make_sim(MICRO)
+    x, y = 6.0 + 1.5 * 3.5, sim.throats.midpoints[_throat(sim, 11.25, -1.75), 1]
+    k = _throat(sim, x, y)
+    arch = [[x - 0.9, y - 0.52], [x - 0.9, y + 0.52], [2.0, 0.0]]
+    sim.set_state([arch])
+    window = MICRO["clog"]["window"]
+    sim.run(stop=lambda: sim.t > 0.5 * window)
+    assert np.isfinite(sim.run_state.throat_static_t[0, k])
+    sim.set_state([[[2.0, -1.0], [2.0, 1.0], [2.0, 0.0]]])        # taken away
+    sim.run(stop=lambda: sim.t > 0.75 * window)
+    assert not np.isfinite(sim.run_state.throat_static_t[0, k])
+    t_back = sim.t
+    sim.set_state([arch])
+    sim.run(stop=lambda: sim.t > 1.2 * window)    # a window after the first stop, not after the second
+    assert not np.isfinite(sim.run_state.throat_t_clog).any()
+    sim.run()
+    assert sim.run_state.throat_t_clog[0, k] > t_back

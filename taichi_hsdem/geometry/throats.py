@@ -182,9 +182,9 @@ def find_throats(outline, obstacles) -> Throats:
 
 
 def observe(throats: Throats, x_before, alive_before, x, v, alive, rest_speed: float,
-            reach: float) -> tuple[np.ndarray, np.ndarray]:
+            reach: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What a check of one realization sees at each throat: (passages (T,) int,
-    blocked at rest (T,) bool).
+    blocked at rest (T,) bool, reached (T,) bool: it holds a particle now).
 
     A passage is a centre whose straight path from its position at the previous
     check (``x_before``, alive then) to ``x`` crosses the throat's segment, either
@@ -193,7 +193,8 @@ def observe(throats: Throats, x_before, alive_before, x, v, alive, rest_speed: f
     throat whose segment is nearest, when nearer than ``reach`` (the largest
     diameter); a throat is blocked at rest, as the single constriction's arch
     test, when it holds particles, none moves at ``rest_speed`` or faster and none
-    passed it.
+    passed it. A throat that holds no particle has not been reached (or was left):
+    the caller starts its rest afresh when one comes.
     """
     T = len(throats)
     # a path (a point) that reaches a throat's segment comes within its half
@@ -212,7 +213,7 @@ def observe(throats: Throats, x_before, alive_before, x, v, alive, rest_speed: f
     moving = np.linalg.norm(v[alive], axis=1) >= rest_speed
     held = np.bincount(k[first], minlength=T) > 0
     stirring = np.bincount(k[first][moving[i[first]]], minlength=T) > 0
-    return passed, held & ~stirring & (passed == 0)
+    return passed, held & ~stirring & (passed == 0), held
 
 
 def throat_rows(throats: Throats, passages, t_clog) -> list:

@@ -1,0 +1,65 @@
+"""Issue 46, items 7 and 12: what a run's outputs say.
+
+Ensemble curves keep each clogged (stopped) realization at its final state, with
+the realizations faint behind the mean; count axes get integer ticks; every scene
+with a flow rate gets ``pressure_drop.png``."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from taichi_hsdem import report
+
+pytest.importorskip("matplotlib")
+
+
+@pytest.fixture
+def figures(monkeypatch):
+    """The figures saved, by file name, kept open to be read."""
+    import matplotlib.figure
+    saved = {}
+
+    def keep(fig, path, *args, **kwargs):
+        saved[str(path).rsplit("/", 1)[-1]] = fig
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", keep)
+    monkeypatch.setattr(report, "draw_clog_map", lambda *a, **k: {})
+    return saved
+
+
+def mean_line(fig):
+    (ax,) = fig.axes[:1]
+    (line,) = [ln for ln in ax.lines if ln.get_linewidth() == 2]
+    return line
+
+
+def network_result():
+    """Realization 0 clogs and stops at t = 0.5 with K/K0 0.2 and 60 % of its
+    throats clogged; realization 1 stays open to t = 1 at K/K0 0.6, 20 % clogged."""
+    real = [{"status": "ok", "clogged": True}, {"status": "ok", "clogged": False}]
+    dp0, q = 2.0, 1.0
+    flow = ([(0, t, dp0 / k, q) for t, k in ((0.0, 1.0), (0.25, 0.5), (0.5, 0.2))]
+            + [(1, t, dp0 / 0.6, q) for t in (0.0, 0.25, 0.5, 0.75, 1.0)])
+    network = [(0, 0.0, 10, 0), (0, 0.3, 14, 3), (0, 0.5, 16, 6),
+               (1, 0.0, 10, 0), (1, 0.5, 15, 2), (1, 1.0, 24, 2)]
+    return SimpleNamespace(summary={"realizations": real}, flow=flow, network=network,
+                           throats=[], scene=SimpleNamespace(name="fake", units="SI")), (dp0, q)
+
+
+def test_a_clogged_realization_that_stopped_stays_clogged_in_the_means(tmp_path, figures):
+    result, empty = network_result()
+    drawn = report.plot_network(result, tmp_path, [None] * 10, None, empty)
+    assert drawn["permeability"] == "permeability.png"
+    t, k = mean_line(figures["permeability.png"]).get_data()
+    assert t[-1] == 1.0
+    assert np.all(np.diff(k) <= 1e-12)              # never reads as unclogging
+    assert k[-1] == pytest.approx(0.4)              # (0.2 + 0.6) / 2: 0 held, not dropped
+    n, f = mean_line(figures["throats_clogged.png"]).get_data()
+    assert n[-1] == 24
+    assert np.all(np.diff(f) >= -1e-12)             # the clogged fraction never falls
+    assert f[-1] == pytest.approx((0.6 + 0.2) / 2)
+    # the realizations faint behind the mean, the stopped one dotted at its end
+    ax = figures["permeability.png"].axes[0]
+    faint = [ln for ln in ax.lines if ln.get_linewidth() < 1 and ln.get_alpha() is not None]
+    assert len(faint) == 3 and all(ln.get_alpha() <= 0.4 for ln in faint)
+    (dotted,) = [ln for ln in faint if ln.get_linestyle() == ":"]
+    assert dotted.get_xydata().tolist() == [[0.5, 0.2], [1.0, 0.2]]
