@@ -8,6 +8,9 @@
   time to reach the constriction, so the law is drawn over the steady stream
   only (:func:`law_line`): from the time the stream is established, the mean
   over realizations of their first escape, through the mean curve there;
+* ``pressure_drop.png``, with a flow-rate inlet (:func:`plot_pressure_drop`): the
+  pressure drop the pump reads (``flow.csv``) against time, each realization
+  faint behind their mean;
 * ``pmf.png`` (at least :data:`taichi_hsdem.stats.MIN_CLOGS` clogged
   realizations; fewer cannot show a shape, and the summary says why it is
   missing): the PMF of ``s / <s>`` on a log scale with ``exp(-x)``, the
@@ -129,12 +132,15 @@ def plot_run(result, folder: Path, law=None) -> dict:
     drawn.update(draw_escapees(ax, result, law))
     ax.set_xlabel("t (s)" if result.scene.units == "SI" else "t")
     ax.set_ylabel("escapees s")
+    integer_ticks(ax.yaxis)
     ax.set_title(f"{result.scene.name}: escapees over time")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(folder / "escapees.png", dpi=110)
     plt.close(fig)
+
+    drawn.update(plot_pressure_drop(plt, result, folder))
 
     counted = [r for r in real if r["status"] in ("ok", "interrupted")]
     s = np.array([r["escapees"] for r in counted], dtype=np.int64)
@@ -165,6 +171,49 @@ def plot_run(result, folder: Path, law=None) -> dict:
         else:
             drawn["pmf_skipped"] = "every clogged realization had s = 0: s/<s> is undefined"
     return drawn
+
+
+def integer_ticks(axis) -> None:
+    """Ticks at whole numbers only on ``axis`` (a count: escapees, particles)."""
+    from matplotlib.ticker import MaxNLocator
+    axis.set_major_locator(MaxNLocator(integer=True))
+
+
+def plot_pressure_drop(plt, result, folder: Path) -> dict:
+    """``pressure_drop.png`` of a scene with a flow-rate inlet: the pressure drop
+    the pump reads (``flow.csv``) against time, each stable realization faint,
+    their mean bold, a clogged realization that stopped kept at its final drop
+    (:func:`ensemble_mean`). Returns ``{"pressure_drop": name}``, or ``{}`` for a
+    scene without a flow rate (under a pressure inlet the drop is imposed) or
+    without rows."""
+    fluid = getattr(result.scene, "fluid", None)
+    if fluid is None or not fluid.enabled or fluid.bc != "flow_rate" or not result.flow:
+        return {}
+    real = result.summary["realizations"]
+    stable = {r for r, row in enumerate(real) if row["status"] != "unstable"}
+    per = {}
+    for r, t, dp, _ in result.flow:
+        if r in stable and np.isfinite(dp):
+            per.setdefault(r, []).append((t, dp))
+    if not per:
+        return {}
+    per = {r: tuple(np.array(rows, dtype=float).T) for r, rows in per.items()}
+    held = {r for r in per if real[r]["clogged"]}
+    si = result.scene.units == "SI"
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    grid, mean, top = ensemble_mean(per, held)
+    draw_faint(ax, per, held, top)
+    ax.plot(grid, mean, color="C1", lw=2, label=ensemble_label(len(per), held))
+    ax.set_ylim(bottom=0.0)
+    ax.set_xlabel("t (s)" if si else "t")
+    ax.set_ylabel("pressure drop (Pa)" if si else "pressure drop (dimensionless)")
+    q = f"{fluid.flow_rate:.3g} m^3/s" if si else f"{fluid.flow_rate:.3g}"
+    ax.set_title(f"{result.scene.name}: pressure drop at the flow rate {q}", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(Path(folder) / "pressure_drop.png", dpi=110)
+    plt.close(fig)
+    return {"pressure_drop": "pressure_drop.png"}
 
 
 def pmf_title(escapees, clogged, test=None) -> str:
@@ -281,6 +330,7 @@ def plot_network(result, folder: Path, throats, geometry, empty) -> dict:
         ax.step(grid, mean, where="post", color="C3", lw=2,
                 label=ensemble_label(len(per), held & set(per)))
         ax.set_xlabel("particles injected")
+        integer_ticks(ax.xaxis)
         ax.set_ylabel(f"fraction of the {T} throats clogged")
         ax.set_ylim(0.0, 1.0)
         ax.set_title(f"{result.scene.name}: throats clogged", fontsize=9)

@@ -63,3 +63,51 @@ def test_a_clogged_realization_that_stopped_stays_clogged_in_the_means(tmp_path,
     assert len(faint) == 3 and all(ln.get_alpha() <= 0.4 for ln in faint)
     (dotted,) = [ln for ln in faint if ln.get_linestyle() == ":"]
     assert dotted.get_xydata().tolist() == [[0.5, 0.2], [1.0, 0.2]]
+
+
+def run_result(fluid, units="SI"):
+    """Two realizations of a single-constriction run: realization 0 clogs and
+    stops at t = 0.4 at a drop of 9 Pa; realization 1 runs to t = 1 and ends at
+    3 Pa; escapees up to 3 (matplotlib would tick them every 0.5)."""
+    real = [{"status": "ok", "clogged": True, "escapees": 2},
+            {"status": "ok", "clogged": False, "escapees": 3}]
+    series = ([(0, t, s) for t, s in ((0.0, 0), (0.2, 1), (0.4, 2))]
+              + [(1, t, s) for t, s in ((0.0, 0), (0.5, 2), (1.0, 3))])
+    flow = ([(0, t, dp, 1e-10) for t, dp in ((0.0, 1.0), (0.2, 4.0), (0.4, 9.0))]
+            + [(1, t, dp, 1e-10) for t, dp in ((0.0, 1.0), (0.5, 2.0), (1.0, 3.0))])
+    return SimpleNamespace(summary={"realizations": real}, series=series, flow=flow,
+                           scene=SimpleNamespace(name="fake", units=units, fluid=fluid))
+
+
+FLOW_RATE = SimpleNamespace(enabled=True, bc="flow_rate", flow_rate=1e-10)
+
+
+def test_escapee_counts_are_ticked_at_whole_numbers(tmp_path, figures):
+    report.plot_run(run_result(FLOW_RATE), tmp_path)
+    ticks = figures["escapees.png"].axes[0].get_yticks()
+    assert len(ticks) >= 3 and np.all(ticks == np.round(ticks))
+
+
+def test_a_scene_with_a_flow_rate_gets_its_pressure_drop_plot(tmp_path, figures):
+    drawn = report.plot_run(run_result(FLOW_RATE), tmp_path)
+    assert drawn["pressure_drop"] == "pressure_drop.png"
+    ax = figures["pressure_drop.png"].axes[0]
+    assert ax.get_ylabel() == "pressure drop (Pa)" and ax.get_xlabel() == "t (s)"
+    t, dp = mean_line(figures["pressure_drop.png"]).get_data()
+    assert t[-1] == 1.0 and dp[-1] == pytest.approx((9.0 + 3.0) / 2)   # the clogged one held
+    faint = [ln for ln in ax.lines if ln.get_linewidth() < 1]
+    assert len(faint) == 3 and all(ln.get_alpha() <= 0.4 for ln in faint)
+
+
+def test_pressure_drop_png_is_written_and_only_with_a_flow_rate(tmp_path):
+    drawn = report.plot_run(run_result(FLOW_RATE), tmp_path)
+    assert (tmp_path / "pressure_drop.png").is_file() and drawn["pressure_drop"]
+    for fluid in (SimpleNamespace(enabled=True, bc="pressure", flow_rate=None),
+                  SimpleNamespace(enabled=False, bc="flow_rate", flow_rate=1e-10)):
+        folder = tmp_path / fluid.bc / str(fluid.enabled)
+        folder.mkdir(parents=True)
+        assert "pressure_drop" not in report.plot_run(run_result(fluid), folder)
+        assert not (folder / "pressure_drop.png").exists()
+    dimensionless = report.plot_run(run_result(FLOW_RATE, units="dimensionless"),
+                                    tmp_path / "pressure" / "True")
+    assert dimensionless["pressure_drop"] == "pressure_drop.png"
