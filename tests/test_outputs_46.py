@@ -111,3 +111,26 @@ def test_pressure_drop_png_is_written_and_only_with_a_flow_rate(tmp_path):
     dimensionless = report.plot_run(run_result(FLOW_RATE, units="dimensionless"),
                                     tmp_path / "pressure" / "True")
     assert dimensionless["pressure_drop"] == "pressure_drop.png"
+
+
+def test_the_cli_docs_example_reads_a_run_without_pandas(tmp_path, monkeypatch):
+    """docs/cli.md's reading example runs as shipped with what the project
+    installs (pandas is in no extra): on a run folder's escapees.csv and
+    summary.json it draws escapees_by_hand.png."""
+    import re
+    import sys
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "docs" / "cli.md").read_text()
+    (block,) = re.findall(r"^Reading the results.*?^```python\n(.*?)^```", text, re.S | re.M)
+    run = tmp_path / "runs" / "vani_phi026"
+    run.mkdir(parents=True)
+    (run / "escapees.csv").write_text("realization,t,escapees\n0,0.0,0\n1,0.0,0\n"
+                                      "0,0.5,3\n1,0.5,1\n0,1.0,4\n1,1.0,6\n")
+    (run / "summary.json").write_text('{"mean_escapees": 5.0, "mean_escapees_ci": [2, 9], '
+                                      '"never_clogged": 1}')
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setitem(sys.modules, "pandas", None)      # as where it is not installed
+    import matplotlib
+    matplotlib.use("Agg")
+    exec(compile(block, "docs/cli.md", "exec"), {})
+    assert (tmp_path / "escapees_by_hand.png").stat().st_size > 0
