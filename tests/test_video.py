@@ -270,10 +270,10 @@ def test_squares_are_drawn_turned_by_their_theta(squares_run):
 
 def test_frame_zero_is_the_initial_state_and_the_range_holds_every_frame(tmp_path):
     """The recorder on a Simulation in this process: frame 0 shows the placed
-    particles before any step, the colour range starts at the initial solve's and
-    only widens, holding every frame's pressure (nothing clipped), the strip is
-    in the scene's units (hourglass24 is dimensionless), and frames land at
-    output.frames times from 0 to t_end."""
+    particles before any step, the colour range is the initial solve's and every
+    frame's pressure (nothing clipped), one range for every frame (issue 46), the
+    strip is in the scene's units (hourglass24 is dimensionless), and frames land
+    at output.frames times from 0 to t_end."""
     needs_vulkan()
     from taichi_hsdem import Simulation
     from taichi_hsdem.render import VideoRecorder
@@ -288,13 +288,18 @@ def test_frame_zero_is_the_initial_state_and_the_range_holds_every_frame(tmp_pat
     assert (rec.renderer.time_unit, rec.renderer.pressure_unit) == ("", "dimensionless")
     assert rec.frame_times == pytest.approx([0.0, 0.5 / 3, 1.0 / 3, 0.5])
     seen = []
-    ranges = []
     extremes = []
+    ranges = []
+    draw = rec.renderer.draw
+
+    def drawing(*args, **kwargs):
+        ranges.append(rec.renderer.pressure_range)
+        return draw(*args, **kwargs)
+    rec.renderer.draw = drawing
 
     def on_frame(s):
         seen.append(s.t)
         rec(s)
-        ranges.append(rec.renderer.pressure_range)
         p = s.pressure()[0]
         extremes.append((p[np.isfinite(p)].min(), p[np.isfinite(p)].max()))
 
@@ -302,11 +307,10 @@ def test_frame_zero_is_the_initial_state_and_the_range_holds_every_frame(tmp_pat
     rec.close(keep=True)
     assert rec.error is None and rec.frames == 4
     assert seen[0] == 0.0 and seen[-1] == pytest.approx(0.5, abs=sim.dt)
-    # each frame widens the range so far to its own extremes, never narrows it
-    before = (finite.min(), finite.max())
-    for now, (lo, hi) in zip(ranges, extremes):
-        assert now == (min(before[0], lo), max(before[1], hi))
-        before = now
+    # one range, the initial solve's and every frame's extremes, for every frame
+    whole = (min([finite.min()] + [lo for lo, _ in extremes]),
+             max([finite.max()] + [hi for _, hi in extremes]))
+    assert rec.pressure_range == whole and ranges == [whole] * 4
     assert (tmp_path / "video.mp4").is_file()
     assert not (tmp_path / "video.mp4.part.mp4").exists()
 
@@ -356,6 +360,47 @@ def test_the_video_ends_at_the_first_frame_after_the_realization_stopped(tmp_pat
                                        int(col) - 1:int(col) + 2].reshape(-1, 3), axis=0)
             assert close_to(rgb, species_rgb(sp)), (x, sp, rgb)
     assert rec.summary(result.summary["wall_time_s"])["ended_at_stop"] is True
+
+
+def test_the_colour_scale_is_the_whole_runs_and_never_widens(tmp_path):
+    """Issue 46, item 12: under a flow-rate inlet the pressure climbs as the disks
+    fill the micromodel (the pump's drop 4.5 Pa at t = 0, higher by t = 0.3 s);
+    every frame is drawn on one range that holds the last frame's pressure, with
+    the unit (Pa) and the same labels in every frame's strip, and the spool of
+    frames is gone after close."""
+    needs_vulkan()
+    from taichi_hsdem import Simulation
+    from taichi_hsdem.render import VideoRecorder
+
+    sim = Simulation(load_scene(str(REPO / "scenes" / "micromodel.toml"), [
+        "run.t_end=0.3", "run.realizations=1", "output.frames=4", "output.width=480"]))
+    rec = VideoRecorder(sim, tmp_path / "video.mp4")
+    ranges, highs = [], []
+    draw = rec.renderer.draw
+
+    def drawing(*args, **kwargs):
+        ranges.append(rec.renderer.pressure_range)
+        return draw(*args, **kwargs)
+    rec.renderer.draw = drawing
+
+    def on_frame(s):
+        rec(s)
+        p = s.pressure()[0]
+        highs.append(p[np.isfinite(p)].max())
+
+    sim.run(on_frame=on_frame, frame_times=rec.frame_times)
+    assert highs[-1] > 1.05 * highs[0]                # the pressure climbed
+    rec.close(keep=True)
+    assert rec.error is None and len(ranges) == 4 and len(set(ranges)) == 1
+    lo, hi = ranges[0]
+    assert hi == pytest.approx(max(highs)) and rec.pressure_range == (lo, hi)
+    assert rec.renderer.pressure_unit == "Pa"
+    _, frames = read_video(tmp_path / "video.mp4")
+    assert len(frames) == 4
+    # the colour bar and its labels (the strip's right third) alike in every frame
+    strip = [f[rec.renderer.domain_height:, 2 * f.shape[1] // 3:].astype(int) for f in frames]
+    assert all(np.abs(s - strip[0]).max() <= TOL for s in strip[1:])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["video.mp4"]
 
 
 # ------------------------------------------------------------------ no Vulkan

@@ -2,6 +2,7 @@
 draws one realization of a running simulation into them (:class:`VideoRecorder`)."""
 import math
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -95,15 +96,18 @@ class VideoRecorder:
     that realization stopped (a clog, or an instability): it shows the final state
     once instead of repeating it up to ``t_end``.
 
-    The pressure colour map starts from the range of the initial solve (the
-    open channel with the particles as placed) and widens to the largest (and
-    smallest) pressure any drawn frame held (``Renderer(grow_range=True)``):
-    colours compare across frames while the pressure stays within what was
-    seen, and nothing is clipped when it builds up (the inlet pressure rising
-    behind a clog under a flow-rate inlet), so the gradient stays visible. The
-    strip under each frame prints the unit (Pa, or "dimensionless" for a
-    dimensionless scene) and the range next to the colour bar; :meth:`summary`
-    reports the final range.
+    The pressure colour scale is fixed for the whole video: one range, the
+    smallest and largest pressure of the initial solve and of every frame, so
+    that a colour means one pressure in every frame, nothing is clipped, and a
+    pressure that builds up (the inlet pressure rising behind a clog under a
+    flow-rate inlet) shows as colours that change, not as a bar that widens. The
+    frames' inputs (the particles, the pressure field, the overlay) are spooled
+    to disk beside the video as the run draws them, and drawn and encoded at
+    ``close(keep=True)``, when the range is known. The strip under each frame
+    prints the unit (Pa, or "dimensionless" for a dimensionless scene) and the
+    range next to the colour bar, the same in every frame; :meth:`summary`
+    reports it. A live window (``viewer``) cannot wait for the range: it is drawn
+    at once, on a scale that widens to what it has shown.
 
     With several throats (a micromodel) every clogged throat is drawn as a red bar
     across its gap, and the corner of the domain prints the pressure drop of the
@@ -111,7 +115,8 @@ class VideoRecorder:
 
     The file is written as ``<name>.part.mp4`` and renamed by
     ``close(keep=True)``. A frame that fails to render stops the video (the run
-    goes on); :attr:`error` then says why and ``close`` keeps nothing.
+    goes on); :attr:`error` then says why and ``close`` keeps nothing. The spool
+    (``<name>.frames``) is removed by ``close`` either way.
     """
 
     def __init__(self, sim, path: Path | None, viewer=None):
@@ -142,6 +147,13 @@ class VideoRecorder:
         self.path = None if path is None else Path(path)
         self.tmp = None if path is None else self.path.with_name(self.path.name + ".part.mp4")
         self.writer = None if path is None else VideoWriter(self.tmp, self.fps)
+        # the frames' inputs, drawn at close on the whole run's range
+        self.spool = None if path is None else self.path.with_name(self.path.name + ".frames")
+        if self.spool is not None:
+            shutil.rmtree(self.spool, ignore_errors=True)
+            self.spool.mkdir()
+        self._range = prange        # the initial solve's and every frame's, so far
+        self._species = None
         self.frames = 0
         self.ended = False          # the shown realization stopped and its last frame is drawn
         self.seconds = 0.0          # drawing and encoding frames, inside the run
@@ -181,9 +193,10 @@ class VideoRecorder:
 
     @property
     def pressure_range(self):
-        """The colour-map range so far, (p_min, p_max): the initial solve's,
-        widened by every drawn frame; None without fluid."""
-        return self.renderer.pressure_range
+        """The video's colour-map range, (p_min, p_max): the initial solve's and
+        every frame's pressures so far, the whole run's once closed; None without
+        fluid."""
+        return self._range
 
     @property
     def frame_times(self) -> list[float]:
@@ -201,43 +214,85 @@ class VideoRecorder:
             pres = None
             if sim.fluid is not None:
                 pres = self._display_pressure(sim.pressure()[r])
+                seen = finite_range(pres)
+                if seen is not None:
+                    self._range = seen if self._range is None else (
+                        min(self._range[0], seen[0]), max(self._range[1], seen[1]))
             st = sim.state()
-            # the live counter: the results' count is only refreshed every check
-            esc = int(sim.escaped()[r])
-            frame = self.renderer.draw(st["x"][r], st["theta"][r], st["species"],
-                                       st["alive"][r], pressure=pres, t=sim.t, escapees=esc)
+            self._species = st["species"]
+            frame = {"x": st["x"][r], "theta": st["theta"][r], "alive": st["alive"][r],
+                     # the live counter: the results' count is only refreshed every check
+                     "t": sim.t, "escapees": int(sim.escaped()[r])}
+            if pres is not None:
+                frame["pressure"] = pres
             if sim.throats.network:
-                self._draw_network(sim, frame)
-            if self.writer is not None:
-                self.writer.write(frame)
+                frame["clogged"] = np.isfinite(sim.run_state.throat_t_clog[r])
+                frame["drop"] = next((row[2] for row in reversed(sim.run_state.flow)
+                                      if row[0] == r), np.nan)
+            if self.spool is not None:
+                np.savez(self.spool / f"{self.frames:06d}.npz", **frame)
+            live = None
+            if self.viewer is not None or self.spool is None:
+                # a window (or no file: drawn for a viewer only) cannot wait for the range
+                self.renderer.grow_range = True
+                live = self._draw(sim.throats, frame)
         except Exception as exc:        # a broken video must not lose the run
             self.error = f"{type(exc).__name__}: {exc}"
             return
         finally:
             self.seconds += time.perf_counter() - t0
         self.frames += 1
-        if self.viewer is not None:
+        if live is not None and self.viewer is not None:
             try:
-                self.viewer.show(sim, frame)   # outside the timing: it waits for keys
+                self.viewer.show(sim, live)    # outside the timing: it waits for keys
             except Exception as exc:           # a window that cannot open must not stop the run
                 print(f"--view stopped: the window failed ({type(exc).__name__}: {exc}); "
                       "the run goes on", file=sys.stderr)
                 self.viewer = None
 
-    def _draw_network(self, sim, frame):
+    def _draw(self, throats, frame):
+        """One frame's image from its inputs (what :meth:`__call__` spools)."""
+        out = self.renderer.draw(frame["x"], frame["theta"], self._species, frame["alive"],
+                                 pressure=frame.get("pressure"), t=float(frame["t"]),
+                                 escapees=int(frame["escapees"]))
+        if throats.network:
+            self._draw_network(throats, frame, out)
+        return out
+
+    def _draw_network(self, throats, frame, out):
         """The clogged throats (red bars) and the label of :mod:`.overlay`."""
-        r, rend = self.r, self.renderer
-        clogged = np.isfinite(sim.run_state.throat_t_clog[r])
-        th = sim.throats
-        domain = frame[:rend.domain_height]
+        rend = self.renderer
+        clogged = np.asarray(frame["clogged"], dtype=bool)
+        domain = out[:rend.domain_height]
         if clogged.any():
-            ends = np.stack([rend.world_to_pixel(th.start[clogged]),
-                             rend.world_to_pixel(th.end[clogged])], axis=1)
+            ends = np.stack([rend.world_to_pixel(throats.start[clogged]),
+                             rend.world_to_pixel(throats.end[clogged])], axis=1)
             paint_segments(domain, ends, max(1.5, rend.width / 320), CLOG_RED)
-        drop = next((row[2] for row in reversed(sim.run_state.flow) if row[0] == r), None)
+        drop = float(frame["drop"])
         unit = "" if rend.pressure_unit == "dimensionless" else rend.pressure_unit
-        paint_label(domain, network_label(int(clogged.sum()), len(th), drop, unit),
+        paint_label(domain, network_label(int(clogged.sum()), len(throats),
+                                          None if np.isnan(drop) else drop, unit),
                     max(1, rend._scale - 1))
+
+    def _encode(self):
+        """Draw the spooled frames on the whole run's range and encode them."""
+        t0 = time.perf_counter()
+        rend = self.renderer
+        rend.grow_range = False
+        if self._range is not None:
+            lo, hi = self._range
+            if not hi > lo:                      # a uniform field: any positive span
+                hi = lo + max(abs(lo), 1.0) * 1e-6
+            rend.pressure_range = self._range = (lo, hi)
+        try:
+            for k in range(self.frames):
+                with np.load(self.spool / f"{k:06d}.npz") as saved:
+                    frame = {name: saved[name] for name in saved.files}
+                self.writer.write(self._draw(self.sim.throats, frame))
+        except Exception as exc:
+            self.error = f"{type(exc).__name__}: {exc}"
+        finally:
+            self.seconds += time.perf_counter() - t0
 
     def summary(self, wall_time_s: float) -> dict:
         """``summary.json``'s ``"video"`` entry; ``wall_time_s`` is the run's
@@ -260,6 +315,10 @@ class VideoRecorder:
 
     def close(self, keep=True):
         """Finish the file and rename it to ``path`` (``keep``), or delete it."""
+        if keep and self.error is None and self.writer is not None and self.frames:
+            self._encode()
+        if self.spool is not None:
+            shutil.rmtree(self.spool, ignore_errors=True)
         t0 = time.perf_counter()
         try:
             if self.writer is not None:
