@@ -16,6 +16,7 @@ the earlier result as it was. An interrupted run writes its results marked
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import shutil
 import signal
@@ -200,7 +201,19 @@ class _Interrupt:
             raise Stopped(signum)
         self.requested = True
 
+    def _unraisable(self, unraisable):
+        """After a stop, Taichi's objects that the stop cut off half-built complain
+        from their destructors ("Exception ignored in ArgPack.__del__", with a
+        traceback): nothing of ours, and nothing the user can act on. Dropped;
+        anything else goes to the previous hook."""
+        where = getattr(unraisable.object, "__module__", None) or ""
+        if self.signum is not None and where.split(".")[0] == "taichi":
+            return
+        self._previous_hook(unraisable)
+
     def __enter__(self):
+        self._previous_hook = sys.unraisablehook
+        sys.unraisablehook = self._unraisable
         for name in self.SIGNALS:
             sig = getattr(signal, name, None)
             if sig is None:                  # SIGHUP: not on Windows
@@ -217,6 +230,9 @@ class _Interrupt:
         if self.keep and exc[0] is None:
             self.phase = self.DONE
             return
+        if self.signum is not None:
+            gc.collect()            # the half-built objects go now, under our hook
+        sys.unraisablehook = self._previous_hook
         for sig, previous in self.previous.items():
             signal.signal(sig, previous if previous is not None else signal.SIG_DFL)
         self.previous = {}

@@ -252,3 +252,35 @@ def test_a_set_up_signal_a_library_swallows_still_stops_the_run(tmp_path):
     assert proc.returncode == 129, proc.stderr
     assert proc.stderr.strip() == "stopped by SIGHUP during set-up: nothing was written"
     assert not out.exists()
+
+
+def test_after_a_stop_taichis_half_built_objects_do_not_print_tracebacks(monkeypatch):
+    """A stop during set-up can cut a Taichi object off half-built; its destructor
+    then prints "Exception ignored in ... __del__" with a traceback (seen in the
+    fuzzer: ArgPack). After a stop these are dropped; before one, and for any
+    other object, they go to the hook as ever."""
+    import gc
+
+    class Half:
+        def __del__(self):
+            raise AttributeError("'ArgPack' object has no attribute '_ArgPack__argpack'")
+    Half.__del__.__module__ = "taichi.lang.argpack"
+
+    class Ours:
+        def __del__(self):
+            raise AttributeError("ours")
+
+    seen = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: seen.append(str(u.exc_value)))
+    with _Interrupt():
+        Half()
+        gc.collect()
+    assert seen == ["'ArgPack' object has no attribute '_ArgPack__argpack'"]  # no stop
+    seen.clear()
+    with _Interrupt() as interrupt:
+        interrupt.signum = signal.SIGTERM
+        Half()
+        Ours()
+        gc.collect()
+    assert seen == ["ours"]
+    assert sys.unraisablehook != interrupt._unraisable            # restored

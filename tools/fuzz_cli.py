@@ -10,13 +10,15 @@ checkpoints (copies of one real checkpoint, made once); paths with odd
 characters (spaces, unicode, newlines, very long, dangling links, link loops);
 and argument garbage.
 
-A case passes when ``main`` returns 0, 1, 2 or 130, writes a message on stderr
+A case passes when ``main`` returns 0, 1, 2, 130, 143 or 129, writes a message on stderr
 when not 0, shows no traceback or "internal error", lets no exception escape,
 and leaves no complete-looking result (``summary.json`` with status
 "complete") from a failed run. Valid scenes run for real, at most
 ``--valid-runs`` of them and each cut to a few dozen steps; past that, a valid
 case is resolved (every check before the run) but not run. Interrupt cases
-(Ctrl-C after a random delay) always run, up to a few thousand steps.
+(SIGINT, SIGTERM or SIGHUP after a random delay) always run, up to a few thousand
+steps; each must exit 128 + the signal's number with one line and leave no lock
+or staging folder.
 
     nice -n 10 python tools/fuzz_cli.py --cases 2000 --seed 0
 
@@ -47,14 +49,15 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from taichi_hsdem import checkpoint, runner  # noqa: E402
+from taichi_hsdem import checkpoint, output, runner  # noqa: E402
 from taichi_hsdem.cli import main  # noqa: E402
 from taichi_hsdem.scene.keys import SECTIONS, SpeciesConfig, key_specs  # noqa: E402
 
 SCENES = ROOT / "scenes"
 BASES = ["hourglass24", "vani_phi026", "squares", "polygons", "concave"]
 STEPS = 30            # DEM steps a valid run is cut to
-EXITS = (0, 1, 2, 130)
+STOPS = (130, 143, 129)     # 128 + SIGINT's, SIGTERM's, SIGHUP's number
+EXITS = (0, 1, 2, *STOPS)
 # Keys whose large valid values only make a run long, not wrong: kept small.
 SIZE = {"run.realizations": 3, "particles.count": 30, "particles.nodes": 60,
         "output.frames": 4, "output.fps": 30, "output.width": 128, "particles.n_vertices": 8}
@@ -83,6 +86,7 @@ class Fuzzer:
         self.texts = {b: (SCENES / f"{b}.toml").read_text() for b in BASES}
         self.n = 0
         self.sigint_after = None     # seconds to Ctrl-C in the current case, or None
+        self.signal = signal.SIGINT  # and which signal
 
     # ------------------------------------------------------------------ plumbing
     def path(self, name: str) -> Path:
@@ -415,17 +419,20 @@ class Fuzzer:
 
     # ------------------------------------------------------------------ runs
     def case_interrupt(self):
-        """A valid run that gets Ctrl-C (SIGINT) after a random delay: during set-up,
-        the run, or after it ended; ``self.sigint_after`` tells the loop when."""
+        """A valid run that gets Ctrl-C (SIGINT), SIGTERM or SIGHUP after a random
+        delay: during set-up, the run, the writing of the results, or after it
+        ended; ``self.sigint_after`` and ``self.signal`` tell the loop when and which."""
         self.sigint_after = self.rng.uniform(0.0, 3.0)
+        self.signal = self.rng.choice([signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
         base = self.rng.choice(["hourglass24", "vani_phi026"])
         return [str(SCENES / f"{base}.toml"), "--out", self.out(), "--quiet"]
 
     def case(self):
         self.sigint_after = None
+        self.signal = signal.SIGINT
         family = self.rng.choices(
             ["overrides", "combination", "toml", "polygon", "resume", "paths", "argv",
-             "interrupt"], weights=[35, 8, 15, 12, 15, 10, 5, 2])[0]
+             "interrupt"], weights=[35, 8, 15, 12, 15, 10, 5, 4])[0]
         return family, getattr(self, f"case_{family}")()
 
     def guarded_build(self, build):
@@ -451,21 +458,29 @@ class Fuzzer:
 
 
 @contextlib.contextmanager
-def _sigint_after(seconds: float | None):
-    """Send this process SIGINT after ``seconds`` (None: never); one that arrives
+def _signal_after(seconds: float | None, sig=signal.SIGINT):
+    """Send this process ``sig`` after ``seconds`` (None: never); one that arrives
     after ``main`` returned is ignored here, not raised in the fuzzer."""
     if seconds is None:
         yield
         return
-    previous = signal.signal(signal.SIGINT, lambda *a: None)
-    timer = threading.Timer(seconds, os.kill, (os.getpid(), signal.SIGINT))
+    previous = signal.signal(sig, lambda *a: None)
+    timer = threading.Timer(seconds, os.kill, (os.getpid(), sig))
     timer.start()
     try:
         yield
     finally:
         timer.cancel()
         timer.join()
-        signal.signal(signal.SIGINT, previous)
+        signal.signal(sig, previous)
+
+
+def _leftovers(folder: Path | None) -> list[str]:
+    """A lock or staging folder a stopped run left in ``folder``."""
+    if folder is None or not folder.is_dir():
+        return []
+    return [p.name for p in folder.iterdir()
+            if p.name.startswith((output.STAGING_PREFIX, output.LOCK))]
 
 
 def _complete(folder: Path) -> bytes | None:
@@ -508,7 +523,7 @@ def run_cases(n_cases: int, seed: int, valid_runs: int, work: Path, verbose=Fals
             t1 = time.perf_counter()
             problem = None
             with contextlib.redirect_stderr(err), contextlib.redirect_stdout(std), \
-                    _sigint_after(fuzz.sigint_after):
+                    _signal_after(fuzz.sigint_after, fuzz.signal):
                 try:
                     code = main(list(args))
                 except _Skip:
@@ -525,6 +540,20 @@ def run_cases(n_cases: int, seed: int, valid_runs: int, work: Path, verbose=Fals
                     problem = f"exit {code} without a message"
                 elif "Traceback" in text or "internal error" in text:
                     problem = "traceback or internal error on stderr"
+            # A stopped run exits 128 + its signal's number with one line and leaves
+            # no lock or staging folder; a result it kept says how it ended.
+            if problem is None and code in STOPS:
+                lines = text.strip().splitlines()
+                summary = _complete(out) if out is not None else None
+                if code != 128 + int(fuzz.signal):
+                    problem = f"exit {code} for {signal.Signals(fuzz.signal).name}"
+                elif len(lines) != 1:
+                    problem = f"{len(lines)} lines after a stop, not one"
+                elif _leftovers(out):
+                    problem = f"left {_leftovers(out)} behind"
+                elif summary is not None and summary != before and not (
+                        b'"interrupted"' in summary or b'"complete"' in summary):
+                    problem = "a stopped run left a summary neither interrupted nor complete"
             # A failed or refused run (1, 2) must leave the folder's summary as it was;
             # an interrupted one (130) may have finished writing first, and says so.
             if problem is None and code in (1, 2) and out is not None:
