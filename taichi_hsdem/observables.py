@@ -51,6 +51,9 @@ class Result:
     network: list = field(default_factory=list)
     # ArchRow per arch of the census, by realization and arch number
     arches: list = field(default_factory=list)
+    # with several species: (realization, t, (escapees per species)) beside each
+    # row of ``series``, in the same order (empty otherwise)
+    series_species: list = field(default_factory=list)
     final: dict = field(default_factory=dict)       # numpy arrays (R, N, ...)
     notes: dict = field(default_factory=dict)       # what every "auto" chose, and why
 
@@ -74,6 +77,75 @@ def kinetic_energy(model, species, st, r) -> float:
     a = st["alive"][r]
     return float(0.5 * np.sum(mass[a] * np.sum(st["v"][r][a] ** 2, axis=1))
                  + 0.5 * np.sum(inertia[a] * st["omega"][r][a] ** 2))
+
+
+# ------------------------------------------------------------------ escapee series
+def count_species(rs: RunState, dead) -> None:
+    """At a check, before feeding (``dead`` (R, S) the dead bodies per species
+    now): the escapes per species since the last check into
+    ``rs.species_escaped``, for every realization, clogged or not. A body dies
+    only by escaping and comes back only at a check, so the dead bodies beyond
+    those the last check left (``rs.unfed_by_species``) escaped since."""
+    rs.species_escaped += np.asarray(dead, dtype=np.int64) - rs.unfed_by_species
+
+
+def species_now(rs: RunState, dead) -> np.ndarray:
+    """Escapes per species (R, S) now, between checks: those counted at the checks
+    (:func:`count_species`) and the bodies dead since the last one (``dead`` (R, S)
+    now)."""
+    return rs.species_escaped + np.asarray(dead, dtype=np.int64) - rs.unfed_by_species
+
+
+def record_series(rs: RunState, running, escaped, dead=None) -> None:
+    """The escapee series' rows at ``rs.t``: ``(r, t, escapees)`` into ``rs.series``
+    for each realization ``running`` (``escaped`` (R,) the escapes so far) and,
+    with ``dead`` (R, S) (a scene of several species; None for one),
+    ``(r, t, (escapees per species))`` into ``rs.series_species`` beside it
+    (:func:`species_now`)."""
+    by_species = None if dead is None else species_now(rs, dead)
+    for r in range(len(running)):
+        if running[r]:
+            rs.series.append((r, rs.t, int(escaped[r])))
+            if by_species is not None:
+                rs.series_species.append((r, rs.t, tuple(int(v) for v in by_species[r])))
+
+
+def escapee_table(series, statuses, species=None, series_species=None) -> tuple[list, list]:
+    """``escapees.csv`` as ``(header, rows)``: ``realization,t,escapees`` from
+    ``series`` and, with several ``species`` (their names) and their rows
+    ``series_species`` beside each of ``series`` (:attr:`Result.series_species`),
+    one column ``escapees_<name>`` per species after those. A scene of one species,
+    or a run that recorded no per-species rows, keeps the three columns. Unstable
+    realizations (``statuses``) are left out.
+
+    Examples
+    --------
+    >>> escapee_table([(0, 0.5, 3)], ["ok"])
+    (['realization', 't', 'escapees'], [[0, '0.5', 3]])
+    >>> escapee_table([(0, 0.5, 3)], ["ok"], ["small", "large"], [(0, 0.5, (1, 2))])
+    (['realization', 't', 'escapees', 'escapees_small', 'escapees_large'], [[0, '0.5', 3, 1, 2]])
+    """
+    per = (species is not None and len(species) > 1 and series_species is not None
+           and len(series_species) == len(series))
+    header = ["realization", "t", "escapees"]
+    if per:
+        names = [str(n) for n in species]
+        unique = len(set(names)) == len(names)
+        header += [f"escapees_{n}" if unique else f"escapees_{k}_{n}"
+                   for k, n in enumerate(names)]
+    rows = []
+    for k, (r, t, s) in enumerate(series):
+        if statuses[r] == "unstable":
+            continue
+        row = [r, repr(float(t)), int(s)]
+        if per:
+            rr, tt, counts = series_species[k]
+            if (rr, tt) != (r, t):
+                raise ValueError(f"series_species row {k} is ({rr}, {tt}), not beside "
+                                 f"the series' ({r}, {t})")
+            row += [int(v) for v in counts]
+        rows.append(row)
+    return header, rows
 
 
 # ------------------------------------------------------------------ clogs
@@ -456,6 +528,11 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
     sc = model.scene
     esc = escaped
     series = list(rs.series)
+    # per-species rows only when every series row has one (a Simulation that
+    # records them: record_series)
+    per_species = (len(rs.series_species) == len(series)
+                   and rs.species_escaped.shape[1] > 1)
+    series_species = list(rs.series_species) if per_species else []
     last_t = {r: t for r, t, _ in series}
     arches = arch_rows(rs)
     formed = np.bincount([a.realization for a in arches], minlength=len(rs.results))
@@ -485,6 +562,9 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
                 row["status"] = "interrupted"
             if last_t.get(r) != rs.t:
                 series.append((r, rs.t, int(esc[r])))
+                if per_species:
+                    now = species_now(rs, dead)[r]
+                    series_species.append((r, rs.t, tuple(int(v) for v in now)))
         real.append(row)
     counted = [r for r in real if r["status"] in ("ok", "interrupted")]
     n_unstable = sum(1 for r in real if r["status"] == "unstable")
@@ -519,7 +599,8 @@ def run_result(model, rs: RunState, throats, escaped, st, dead, *, arch, wall,
         summary["network"] = network_summary(rs, throats, real, escaped, st)
     return Result(scene=sc, summary=summary, series=series, flow=list(rs.flow),
                   throats=throat_rows(throats, rs.throat_passages, rs.throat_t_clog),
-                  network=list(rs.network), arches=arches, final=st, notes=dict(model.notes))
+                  network=list(rs.network), arches=arches, final=st, notes=dict(model.notes),
+                  series_species=series_species)
 
 
 def network_summary(rs: RunState, throats, real, escaped, st) -> dict:

@@ -131,6 +131,13 @@ class RunState:
         a passage reopens it).
     check_x, check_alive : (R, N, 2), (R, N)
         Positions and alive flags at the latest check (or ``set_state``).
+    species_escaped : (R, S) int
+        Escapes per species over the whole run, counted at every check whether
+        the realization clogged or not (``escaped_by_species`` stops at the clog):
+        the per-species escapee series (:func:`~taichi_hsdem.observables.count_species`).
+    series_species : list
+        With several species: ``(realization, t, (escapees per species))`` beside
+        each ``series`` row, in the same order.
     """
     t: float
     steps: int
@@ -158,6 +165,8 @@ class RunState:
     throat_t_clog: np.ndarray
     check_x: np.ndarray
     check_alive: np.ndarray
+    species_escaped: np.ndarray
+    series_species: list
 
     @classmethod
     def start(cls, seeds, n_particles: int, n_species: int, n_throats: int) -> RunState:
@@ -176,7 +185,8 @@ class RunState:
             throat_passages=np.zeros((R, T), dtype=np.int64),
             throat_last_passage_t=np.zeros((R, T)),
             throat_static_t=np.full((R, T), np.nan), throat_t_clog=np.full((R, T), np.nan),
-            check_x=np.zeros((R, N, 2)), check_alive=np.zeros((R, N), dtype=bool))
+            check_x=np.zeros((R, N, 2)), check_alive=np.zeros((R, N), dtype=bool),
+            species_escaped=np.zeros((R, S), dtype=np.int64), series_species=[])
 
     def to_arrays(self) -> tuple[dict, dict]:
         """``(values, arrays)``: every field, the plain ones as JSON-ready values
@@ -194,6 +204,9 @@ class RunState:
             "history_overflows": self.history_overflows, "launches": self.launches,
             "e0": None if self.e0 is None else [float(v) for v in self.e0],
             "u_ref": None if self.u_ref is None else [float(v) for v in self.u_ref],
+            "species_escaped": self.species_escaped.tolist(),
+            "series_species": [[int(r), float(t), [int(v) for v in c]]
+                               for r, t, c in self.series_species],
         }
         arrays = {name: getattr(self, name) for name in ARRAY_FIELDS}
         return values, arrays
@@ -221,6 +234,12 @@ class RunState:
             launches=int(values["launches"]),
             e0=None if values["e0"] is None else np.array(values["e0"]),
             u_ref=None if values["u_ref"] is None else np.array(values["u_ref"]),
+            # a checkpoint written before these: the counts up to the clog, no rows
+            species_escaped=np.array(values.get("species_escaped",
+                                                arrays["escaped_by_species"]),
+                                     dtype=np.int64).reshape(arrays["escaped_by_species"].shape),
+            series_species=[(int(r), float(t), tuple(int(v) for v in c))
+                            for r, t, c in values.get("series_species", [])],
             **{name: arrays[name] for name in ARRAY_FIELDS})
 
 

@@ -134,3 +134,45 @@ def test_the_cli_docs_example_reads_a_run_without_pandas(tmp_path, monkeypatch):
     matplotlib.use("Agg")
     exec(compile(block, "docs/cli.md", "exec"), {})
     assert (tmp_path / "escapees_by_hand.png").stat().st_size > 0
+
+
+def test_the_escapee_series_has_a_column_per_species_and_one_species_keeps_three():
+    """escapees.csv per species (observables.escapee_table, record_series): the
+    escapes counted at every check (count_species, clogged or not) and the bodies
+    dead since, beside each total; one species keeps realization,t,escapees."""
+    import json
+
+    from taichi_hsdem import observables
+    from taichi_hsdem.runstate import RunState
+    rs = RunState.start([0, 1], n_particles=4, n_species=2, n_throats=0)
+    # a check at t = 0.1: realization 0 lost a body of species 0 (escaped), re-fed after
+    rs.t = 0.1
+    observables.count_species(rs, np.array([[1, 0], [0, 0]]))
+    rs.unfed_by_species = np.zeros((2, 2), dtype=np.int64)
+    # a series row at t = 0.15, between checks: one of species 1 has escaped since
+    rs.t = 0.15
+    observables.record_series(rs, [1, 1], np.array([2, 0]), np.array([[0, 1], [0, 0]]))
+    assert rs.series == [(0, 0.15, 2), (1, 0.15, 0)]
+    assert rs.series_species == [(0, 0.15, (1, 1)), (1, 0.15, (0, 0))]
+    header, rows = observables.escapee_table(rs.series, ["ok", "ok"], ["small", "large"],
+                                             rs.series_species)
+    assert header == ["realization", "t", "escapees", "escapees_small", "escapees_large"]
+    assert rows == [[0, "0.15", 2, 1, 1], [1, "0.15", 0, 0, 0]]
+    assert all(sum(row[3:]) == row[2] for row in rows)
+    # an unstable realization is left out, as before
+    assert observables.escapee_table(rs.series, ["ok", "unstable"], ["small", "large"],
+                                     rs.series_species)[1] == rows[:1]
+    # one species (or a run that recorded no per-species rows): the three columns
+    assert observables.escapee_table(rs.series, ["ok", "ok"], ["disks"], []) == (
+        ["realization", "t", "escapees"], [[0, "0.15", 2], [1, "0.15", 0]])
+    assert observables.escapee_table(rs.series, ["ok", "ok"], ["a", "b"], [])[0] == [
+        "realization", "t", "escapees"]
+    # a checkpoint keeps them; one written before them reads as none recorded
+    values, arrays = rs.to_arrays()
+    again = RunState.from_arrays(json.loads(json.dumps(values)), arrays)
+    assert again.series_species == rs.series_species
+    assert again.species_escaped.tolist() == [[1, 0], [0, 0]]
+    for key in ("series_species", "species_escaped"):
+        del values[key]
+    old = RunState.from_arrays(json.loads(json.dumps(values)), arrays)
+    assert old.series_species == [] and old.species_escaped.dtype == np.int64
