@@ -403,7 +403,7 @@ def ensemble_label(n, held) -> str:
     are held at their final state (:func:`ensemble_mean`)."""
     label = f"mean of {n} realization(s)"
     if held:
-        label += f"; the {len(held)} clogged held at their final state (dotted)"
+        label += f"; {len(held)} clogged, held at the final state (dotted)"
     return label
 
 
