@@ -174,14 +174,17 @@ def write_network(rows, statuses, n_throats: int, out: Path):
     atomic_write(out / "network.csv", buf.getvalue())
 
 
-def write_series(series, statuses, out: Path):
-    """``escapees.csv``: realization,t,escapees; unstable realizations are left out."""
+def write_series(series, statuses, out: Path, species=None, series_species=None):
+    """``escapees.csv``: realization,t,escapees, and with several ``species`` a
+    column escapees_<name> per species from ``series_species``
+    (:func:`~taichi_hsdem.observables.escapee_table`); unstable realizations are
+    left out."""
+    from .observables import escapee_table
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["realization", "t", "escapees"])
-    for r, t, s in series:
-        if statuses[r] != "unstable":
-            w.writerow([r, repr(float(t)), int(s)])
+    header, rows = escapee_table(series, statuses, species, series_species)
+    w.writerow(header)
+    w.writerows(rows)
     atomic_write(out / "escapees.csv", buf.getvalue())
 
 
@@ -206,10 +209,11 @@ def write_arches(rows, statuses, out: Path):
 #: Files (and folders) a run writes into its output folder.
 RESULT_FILES = ("scene.resolved.toml", FINAL_STATE, "escapees.csv", "arches.csv", "flow.csv",
                 "throats.csv", "network.csv", "summary.json", "video.mp4", "escapees.png",
-                "pmf.png", "permeability.png", "throats_clogged.png", "clog_map.png",
-                "series.pvd", "vtk", checkpoint.FILE)
+                "pressure_drop.png", "pmf.png", "permeability.png", "throats_clogged.png",
+                "clog_map.png", "series.pvd", "vtk", checkpoint.FILE)
 #: The plots a run may draw (report.py).
-PLOTS = ("escapees.png", "pmf.png", "permeability.png", "throats_clogged.png", "clog_map.png")
+PLOTS = ("escapees.png", "pressure_drop.png", "pmf.png", "permeability.png",
+         "throats_clogged.png", "clog_map.png")
 #: The list of the files the runs of this project wrote in a folder: only these
 #: are ever replaced or removed there.
 MANIFEST = ".taichi_hsdem-files.json"
@@ -398,7 +402,8 @@ class Staging:
         is touched."""
         statuses = [r["status"] for r in result.summary["realizations"]]
         write_resolved_scene(result.scene, self.tmp, result.notes)
-        write_series(result.series, statuses, self.tmp)
+        write_series(result.series, statuses, self.tmp, result.summary["species"],
+                     result.series_species)
         write_arches(result.arches, statuses, self.tmp)
         write_final_state(result, self.tmp)
         names = ["scene.resolved.toml", "escapees.csv", "arches.csv", FINAL_STATE, *extra]

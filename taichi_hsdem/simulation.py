@@ -409,6 +409,8 @@ class Simulation:
         # every check reads the state: the arch test runs at each one (t_clog)
         st = self.state() if running.any() and not final else None
         dead = None if st is None else self._dead_by_species(st["alive"])
+        if dead is not None:
+            observables.count_species(rs, dead)   # every realization, clogged or not
         checked = running.astype(bool)        # a copy: running changes below
         changed = False
         for r in range(self.R):
@@ -540,9 +542,9 @@ class Simulation:
                     on_frame(self)
             if rs.t >= rs.next_series - 0.5 * self.dt:
                 run_np, esc, _, _ = integrate.read_status(self.batch, False)
-                for r in range(self.R):
-                    if run_np[r]:
-                        rs.series.append((r, rs.t, int(esc[r])))
+                dead = (self._dead_by_species(self.bodies.alive.to_numpy())
+                        if len(self.model.species) > 1 else None)
+                observables.record_series(rs, run_np, esc, dead)
                 rs.next_series += series_dt
             if not rs.any_running or rs.steps >= n_end:
                 break
