@@ -224,7 +224,7 @@ class VideoRecorder:
                      # the live counter: the results' count is only refreshed every check
                      "t": sim.t, "escapees": int(sim.escaped()[r])}
             if pres is not None:
-                frame["pressure"] = pres
+                frame["pressure"] = pres.astype(np.float32)    # display only: half the spool
             if sim.throats.network:
                 frame["clogged"] = np.isfinite(sim.run_state.throat_t_clog[r])
                 frame["drop"] = next((row[2] for row in reversed(sim.run_state.flow)
