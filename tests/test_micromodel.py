@@ -250,7 +250,6 @@ def test_shipped_micromodel_writes_its_throats(tmp_path, capsys):
     assert net["realizations"][0]["throats_clogged"] == 0
     # K0: the empty array's pressure drop at the pump's flow rate, a little below
     # the first solve's (the disks in the inlet add resistance)
-    first = next(csv.reader(open(out / "flow.csv")))
     assert 4.0 < net["empty"]["pressure_drop"] < 4.5
     assert net["empty"]["flow_rate"] == pytest.approx(2e-10, rel=1e-9)
     assert 0.5 < net["realizations"][0]["permeability_ratio"] <= 1.0

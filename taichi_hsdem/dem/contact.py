@@ -249,7 +249,6 @@ def ls_pairs(bodies: ti.template(), batch: ti.template(), particles: ti.template
     Pairs whose bounding circles do not meet are skipped (no node of one can be
     inside the other), and so is a node outside the other body's bounding circle.
     """
-    n_part = bodies.x.shape[1]
     ti_, xi, ci, si, vi, wi, noff_i, nn_i = _body_pose(bodies, particles, templates, r, i)
     pole_i = node_world(templates.inside, ti_, xi, ci, si)
     rb_i = particles.bounding_radius[i]

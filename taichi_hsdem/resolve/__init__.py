@@ -21,7 +21,6 @@ import numpy as np
 
 from .. import limits
 from ..geometry import distance as dist
-from ..geometry import walls as wl
 from ..geometry.placement import count_for_fraction
 from ..geometry.wallfield import make_wall_field
 from ..laws import free_permeability, kozeny_carman
