@@ -39,7 +39,10 @@ def test_run_writes_contract_outputs(tmp_path, capsys):
     assert set(r) >= {"seed", "escapees", "clogged", "t_clog", "status"}
     assert r["status"] == "ok" and r["seed"] == 1
     rows = list(csv.reader((out / "escapees.csv").open()))
-    assert rows[0] == ["realization", "t", "escapees"]
+    # three species: a column per species after the total, which they sum to
+    assert rows[0] == ["realization", "t", "escapees"] + [f"escapees_{n}" for n in s["species"]]
+    assert len(s["species"]) == 3
+    assert all(int(row[2]) == sum(int(v) for v in row[3:]) for row in rows[1:])
     assert float(rows[-1][1]) == pytest.approx(1.0, abs=2 * s["dt"])
     resolved = (out / "scene.resolved.toml").read_text()
     assert "dt = " in resolved and '"auto"' not in resolved     # every auto resolved
