@@ -131,6 +131,12 @@ OVERRIDES = ("geometry.constriction_width=308e-6",)
 BETA = 20.0            # degrees
 MU = 0.25              # the scene's friction
 SPHERES = ("m", "up", "low")
+PAIR = ("up", "low")     # --config pair: the two spheres of the held pair
+
+
+def names(n):
+    """The spheres' names: three (the arch) or two (the pair)."""
+    return SPHERES if n == 3 else PAIR
 DEFAULT_OUT = ROOT / "runs" / "stokes_arch" / "arch.csv"
 
 # Mesh presets: h_far over H, h_part over a, h_film over the film's thickness.
@@ -213,14 +219,25 @@ def arch(cell: Cell, gap, delta=0.0, beta=BETA):
     return np.array(out)
 
 
+def pair(cell: Cell, gap):
+    """Centres ``(2, 2)`` (up, low) of the symmetric held pair at the neck: the two
+    spheres ``gap`` (m) apart across the axis and ``gap`` from their funnel walls."""
+    a, c = cell.a, cell.c
+    y = a + 0.5 * gap
+    xp = c - y - math.sqrt(2.0) * (a + gap)
+    return np.array([[xp, y], [xp, -y]])
+
+
 def contacts(cell: Cell, x):
-    """The four contacts: ``(i, j, n, p)``: bodies (``j = None``: a wall), unit normal
-    from ``i`` to ``j``, contact point (the gap's mid-point), all in the plane."""
+    """The contacts (four of the arch, three of the pair): ``(i, j, n, p)``: bodies
+    (``j = None``: a wall), unit normal from ``i`` to ``j``, contact point (the gap's
+    mid-point), all in the plane."""
     out = []
-    for j in (1, 2):
-        n = (x[j] - x[0]) / np.linalg.norm(x[j] - x[0])
-        out.append((0, j, n, 0.5 * (x[0] + cell.a * n + x[j] - cell.a * n)))
-    for j, name in ((1, "up"), (2, "low")):
+    nm = names(len(x))
+    for i, j in (((0, 1), (0, 2)) if len(x) == 3 else ((0, 1),)):
+        n = (x[j] - x[i]) / np.linalg.norm(x[j] - x[i])
+        out.append((i, j, n, 0.5 * (x[i] + cell.a * n + x[j] - cell.a * n)))
+    for j, name in ((nm.index("up"), "up"), (nm.index("low"), "low")):
         n = WALL_N[name]
         dist = abs(n @ x[j] - cell.c / math.sqrt(2.0))
         out.append((j, None, n, x[j] + (cell.a + 0.5 * (dist - cell.a)) * n))
@@ -249,7 +266,8 @@ def statics(cell: Cell, x, F, T, mu=MU):
         of the middle sphere, ``P`` and ``P_T`` (the loads' power along it; the torques' part).
     """
     cs = contacts(cell, x)
-    A = np.zeros((9, 8))                      # rows: (Fx, Fy, M) of each sphere
+    nb = len(x)
+    A = np.zeros((3 * nb, 2 * len(cs)))       # rows: (Fx, Fy, M) of each sphere
     for k, (i, j, n, p) in enumerate(cs):
         tau = np.array([-n[1], n[0]])
         for body, sg in ((i, -1.0), (j, 1.0)):   # on i: -N n + t tau; on j: opposite
@@ -260,19 +278,22 @@ def statics(cell: Cell, x, F, T, mu=MU):
             A[3 * body + 2, 2 * k] += sg * _cross(r, n)
             A[3 * body:3 * body + 2, 2 * k + 1] -= sg * tau
             A[3 * body + 2, 2 * k + 1] -= sg * _cross(r, tau)
-    load = np.concatenate([np.r_[F[s], T[s]] for s in range(3)])
+    load = np.concatenate([np.r_[F[s], T[s]] for s in range(nb)])
     sol, *_ = np.linalg.lstsq(A, -load, rcond=None)
     N, t = sol[0::2], sol[1::2]
     resid = float(np.linalg.norm(A @ sol + load) / np.abs(F).max())
-    # mechanism: the velocities (v, omega) doing no work on any contact force
-    _, _, vt = np.linalg.svd(A.T)
-    mode = vt[-1]
-    mode = mode / mode[1]                      # v_y of the middle sphere = 1
-    v = np.stack([mode[3 * s:3 * s + 2] for s in range(3)])
-    om = np.array([mode[3 * s + 2] for s in range(3)])
+    if nb == 3:
+        # mechanism: the velocities (v, omega) doing no work on any contact force
+        _, _, vt = np.linalg.svd(A.T)
+        mode = vt[-1]
+        mode = mode / mode[1]                      # v_y of the middle sphere = 1
+        v = np.stack([mode[3 * s:3 * s + 2] for s in range(3)])
+        om = np.array([mode[3 * s + 2] for s in range(3)])
+    else:                   # the pair: 6 equations, 6 unknowns, no mechanism
+        v, om = np.zeros((nb, 2)), np.zeros(nb)
     PF = float(np.sum(F * v))
     PT = float(np.sum(T * om))
-    Nmax = [max(N[k] for k, c in enumerate(cs) if s in (c[0], c[1])) for s in range(3)]
+    Nmax = [max(N[k] for k, c in enumerate(cs) if s in (c[0], c[1])) for s in range(nb)]
     return {"N": N.tolist(), "t": t.tolist(), "slip_max": float(np.max(np.abs(t) / N)),
             "N_max": Nmax, "residual": resid, "v": v.tolist(), "omega": om.tolist(),
             "P": PF + PT, "P_T": PT, "mu": mu}
@@ -292,13 +313,22 @@ class Settings:
     h_part: float = 0.25
     h_film: float = 0.7
     order: int = 2
+    config: str = "arch"     # or "pair" (the scene's own width, no override)
+
+    def asdict(self):
+        """The settings as stored with a solve (the arch's without ``config``, as before)."""
+        out = dataclasses.asdict(self)
+        if self.config == "arch":
+            out.pop("config")
+        return out
 
     def mesh_label(self):
         return stokes_fem.mesh_label(self.h_far, self.h_part, self.h_film, self.order)
 
     def tag(self):
         return (f"g{self.gap:g}_dl{self.delta:g}_L{self.L_up:g}-{self.L_down:g}_"
-                f"h{self.h_far:g}_{self.h_part:g}_{self.h_film:g}_p{self.order}")
+                f"h{self.h_far:g}_{self.h_part:g}_{self.h_film:g}_p{self.order}"
+                + ("" if self.config == "arch" else f"_{self.config}"))
 
 
 def clip_x(poly, x0, x1):
@@ -349,7 +379,7 @@ def build_mesh(s: Settings, cell: Cell, x, ng, occ):
     xs = np.asarray(x) / H
     poly = clip_x(np.asarray(cell.outline) / H, (cell.x_neck - s.L_up * cell.d) / H,
                   (cell.x_neck + s.L_down * cell.d) / H)
-    full = stokes_fem.pore_space(poly, 1.0, xs, [a] * 3, h_particle=s.h_part)
+    full = stokes_fem.pore_space(poly, 1.0, xs, [a] * len(xs), h_particle=s.h_part)
     lo, hi = poly.min(axis=0) - 1.0, poly.max(axis=0) + 1.0
     half = occ.Box(occ.Pnt(lo[0], lo[1], -1.0), occ.Pnt(hi[0], hi[1], 0.5))
     half.faces.Max(occ.Z).name = "mid"
@@ -359,7 +389,7 @@ def build_mesh(s: Settings, cell: Cell, x, ng, occ):
             cx, cy, _ = f.center
             f.name = f"p{int(np.argmin(np.hypot(xs[:, 0] - cx, xs[:, 1] - cy)))}"
     films = []
-    for k in range(3):                                   # sphere-plate film
+    for k in range(len(xs)):                             # sphere-plate film
         films += gap_films((xs[k, 0], xs[k, 1], 0.5), (0, 0, 1), a, 0.5 - a, 0.5)
     for i, j, n, p in contacts(cell, np.asarray(x)):
         if j is None:                                    # sphere-wall gap
@@ -382,13 +412,15 @@ def solve3d(s: Settings, cell: Cell, threads=1, verbose=True):
     """Mesh, factorise once, solve ``flow`` and the three ``spin`` problems; the
     loads on each sphere (units ``H = eta = 1``, pressure drop 1, ``Omega = 1``)."""
     ng, occ = stokes_fem.require(threads)
-    x = arch(cell, s.gap * cell.d, s.delta * cell.d)
+    x = (arch(cell, s.gap * cell.d, s.delta * cell.d) if s.config == "arch"
+         else pair(cell, s.gap * cell.d))
+    nb = len(x)
     t0 = time.perf_counter()
     mesh, xs = build_mesh(s, cell, x, ng, occ)
     t_mesh = time.perf_counter() - t0
     if verbose:
         print(f"  mesh {mesh.ne} tets, {t_mesh:.0f} s", flush=True)
-    walls = "plate|wall|p0|p1|p2"
+    walls = "plate|wall|" + "|".join(f"p{k}" for k in range(nb))
     V = ng.VectorH1(mesh, order=s.order, dirichletx=walls, dirichlety=walls,
                     dirichletz=walls + "|mid")
     Q = ng.H1(mesh, order=s.order - 1)
@@ -418,20 +450,20 @@ def solve3d(s: Settings, cell: Cell, threads=1, verbose=True):
                 "T": ng.CF((-(ng.y - cy), ng.x - cx, 0))}[what]
 
     tests = {}
-    for k in range(3):
+    for k in range(nb):
         for what in ("Fx", "Fy", "T"):
             w = ng.GridFunction(X)
             w.components[0].Set(rigid(k, what), definedon=mesh.Boundaries(f"p{k}"))
             tests[k, what] = w
     out = {}
-    for prob in ("flow", "spin_m", "spin_up", "spin_low"):
+    for prob in ("flow",) + tuple(f"spin_{nm}" for nm in names(nb)):
         f = ng.LinearForm(X)
         if prob == "flow":
             f += -1.0 * (v * n) * ng.ds("inlet")
         f.Assemble()
         g = ng.GridFunction(X)
         if prob != "flow":
-            k = SPHERES.index(prob[5:])
+            k = names(nb).index(prob[5:])
             g.components[0].Set(rigid(k, "T"), definedon=mesh.Boundaries(f"p{k}"))
         res = f.vec.CreateVector()
         res.data = f.vec - form.mat * g.vec
@@ -439,13 +471,13 @@ def solve3d(s: Settings, cell: Cell, threads=1, verbose=True):
         r = g.vec.CreateVector()
         r.data = form.mat * g.vec - f.vec
         loads = np.array([[-2.0 * ng.InnerProduct(r, tests[k, w].vec) for w in ("Fx", "Fy", "T")]
-                          for k in range(3)])
+                          for k in range(nb)])
         vel = g.components[0]
         flux = [2.0 * float(ng.Integrate(vel * n, mesh, ng.BND,
                                          definedon=mesh.Boundaries(b))) for b in ("inlet",
                                                                                   "outlet")]
         out[prob] = {"loads": loads.tolist(), "flux_in": -flux[0], "flux_out": flux[1]}
-    return {"settings": dataclasses.asdict(s), "mesh": s.mesh_label(), "ndof": X.ndof,
+    return {"settings": s.asdict(), "mesh": s.mesh_label(), "ndof": X.ndof,
             "elements": mesh.ne, "idle_pressure": len(idle), "centres": x.tolist(),
             "t_mesh": t_mesh,
             "t_factor": t2 - t1, "wall_s": time.perf_counter() - t0, "problems": out}
@@ -456,7 +488,7 @@ def cached3d(s: Settings, cell: Cell, runs_dir, threads):
     path = pathlib.Path(runs_dir) / f"{s.tag()}.json"
     if path.exists():
         rec = json.loads(path.read_text())
-        if rec.get("settings") == dataclasses.asdict(s):
+        if rec.get("settings") == s.asdict():
             return rec
     print(f"solving {s.tag()}", flush=True)
     rec = solve3d(s, cell, threads)
@@ -476,14 +508,15 @@ def loads3d(rec, cell: Cell):
     q = 0.5 * (fl["flux_in"] + fl["flux_out"])               # per unit pressure drop
     fstar = 12.0 * math.pi * q * a ** 2 / W                  # F* at that flux (eta = H = 1)
     L = np.asarray(fl["loads"])
-    K = np.array([[-rec["problems"][f"spin_{sj}"]["loads"][i][2] for sj in SPHERES]
-                  for i in range(3)]) / (8.0 * math.pi * a ** 3)
+    nm = names(len(L))
+    K = np.array([[-rec["problems"][f"spin_{sj}"]["loads"][i][2] for sj in nm]
+                  for i in range(len(L))]) / (8.0 * math.pi * a ** 3)
     return L[:, :2] / fstar, L[:, 2] / (a * fstar), K, q
 
 
 # ------------------------------------------------------------------------- 2D model
 
-def loads2d(cell: Cell, x, cell_size=None, scene_path=SCENE):
+def loads2d(cell: Cell, x, cell_size=None, scene_path=SCENE, overrides=OVERRIDES):
     """Darcy pressure force ``F/F*`` (3, 2) and moment ``T/(a F*)`` (3,) on disks at ``x``."""
     import taichi_hsdem as th
     text = pathlib.Path(scene_path).read_text()
@@ -493,7 +526,7 @@ def loads2d(cell: Cell, x, cell_size=None, scene_path=SCENE):
         if old not in text:
             raise RuntimeError(f"{scene_path}: no line {old!r} to replace")
         text = text.replace(old, new)
-    over = list(OVERRIDES) + ["run.realizations=1"]
+    over = list(overrides) + ["run.realizations=1"]
     if cell_size:
         over.append(f"fluid.cell_size={cell_size!r}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -516,7 +549,8 @@ COLUMNS = ("config", "gap_over_d", "delta_over_d", "model", "mesh", "ndof", "sph
 def rows_for(config, s_gap, s_delta, model, mesh, ndof, cell, x, F, T, K=None):
     st = statics(cell, x, F, T)
     rows = []
-    for k, name in enumerate(SPHERES):
+    nm = names(len(x))
+    for k, name in enumerate(nm):
         Fm = float(np.hypot(*F[k]))
         rows.append({
             "config": config, "gap_over_d": s_gap, "delta_over_d": s_delta, "model": model,
@@ -525,8 +559,8 @@ def rows_for(config, s_gap, s_delta, model, mesh, ndof, cell, x, F, T, K=None):
             "Fx": F[k][0], "Fy": F[k][1], "T": T[k], "T_over_aF": T[k] / Fm,
             "T_over_mu_aNmax": T[k] / (MU * st["N_max"][k]), "slip_max": st["slip_max"],
             "P": st["P"], "P_T": st["P_T"], "omega_mode": st["omega"][k],
-            "K_m": "" if K is None else K[k, 0], "K_up": "" if K is None else K[k, 1],
-            "K_low": "" if K is None else K[k, 2]})
+            **{f"K_{sj}": ("" if K is None or sj not in nm else K[k, nm.index(sj)])
+               for sj in SPHERES}})
     return rows, st
 
 
@@ -537,6 +571,9 @@ def fmt(v):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="coarse mesh, one gap")
+    ap.add_argument("--config", choices=("arch", "pair"), default="arch",
+                    help="the arch of three at W = 2.2 d (default) or the held pair at "
+                         "the scene's own W = 1.7 d (no displaced case)")
     ap.add_argument("--gaps", default="0.05,0.02", help="surface gaps over d (%(default)s)")
     ap.add_argument("--delta", type=float, default=0.05,
                     help="sideways displacement of the middle sphere over d (%(default)s)")
@@ -560,12 +597,14 @@ def main(argv=None):
         return 2
     out = pathlib.Path(args.out)
     runs = pathlib.Path(args.runs) if args.runs else out.parent / "solves"
-    cell = load_cell()
+    pair_ = args.config == "pair"
+    over = () if pair_ else OVERRIDES
+    cell = load_cell(overrides=over)
     mesh_name = "quick" if args.quick else (args.mesh or "default")
     gaps = [float(g) for g in args.gaps.split(",")]
     if args.quick:
         gaps = gaps[:1]
-    deltas = (0.0, args.delta) if args.delta else (0.0,)
+    deltas = (0.0, args.delta) if args.delta and not pair_ else (0.0,)
     ends = {} if args.ends == 3.0 else dict(L_up=args.ends, L_down=args.ends)
     cases = [(g, dl, MESHES[mesh_name], ends) for g in gaps for dl in deltas]
     n_main = len(cases)
@@ -579,19 +618,19 @@ def main(argv=None):
     cases += [(gaps[0], dl, mesh_kw, dom) for mesh_kw, dom in checks for dl in deltas]
     rows, summary = [], []
     for idx, (g, dl, mesh_kw, dom) in enumerate(cases):
-        s = Settings(gap=g, delta=dl, **mesh_kw, **dom)
+        s = Settings(gap=g, delta=dl, **mesh_kw, **dom, config=args.config)
         rec = cached3d(s, cell, runs, args.threads)
         F, T, K, _ = loads3d(rec, cell)
         x = np.asarray(rec["centres"])
         label = rec["mesh"] + ("" if not dom else f" ends {s.L_up:g}d")
-        cfg = "symmetric" if dl == 0 else "displaced"
+        cfg = "pair" if pair_ else ("symmetric" if dl == 0 else "displaced")
         r, st = rows_for(cfg, g, dl, "3D Stokes", label, rec["ndof"], cell, x, F, T, K)
         rows += r
         summary.append((cfg, g, "3D " + label, st))
         if not args.no_2d and idx < n_main:
             for factor in ((1.0,) + ((args.cell2d,) if args.cell2d and not args.quick else ())):
                 size = None if factor == 1.0 else cell.d / 6.0 / factor
-                F2, T2 = loads2d(cell, x, size)
+                F2, T2 = loads2d(cell, x, size, overrides=over)
                 lab = "d/6" if size is None else f"d/{6 * factor:g}"
                 r, st = rows_for(cfg, g, dl, "2D Darcy", f"cell {lab}", "", cell, x, F2, T2)
                 rows += r
