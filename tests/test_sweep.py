@@ -156,20 +156,22 @@ def test_sweep_writes_folders_and_table_then_resumes(tmp_path, capsys, monkeypat
     assert (folders[0] / "summary.json").stat().st_mtime_ns == stamps[0]
     assert (folders[1] / "summary.json").is_file()
 
-    # The same folder with other overrides (here the common t_end) is not finished.
-    rows = run_sweep(HOURGLASS, points[:1], out, common={"run.t_end": 0.2})
+    # The same folder with other overrides (here the common t_end: the sweep file
+    # edited, the same study) is not finished.
+    study = str(sweep_file.resolve())
+    rows = run_sweep(HOURGLASS, points[:1], out, common={"run.t_end": 0.2}, study=study)
     assert rows[0]["status"] == "ran"
     assert json.loads((folders[0] / "summary.json").read_text())["t_end"] == 0.2
     # ... and resume=False runs a finished point again
     assert run_sweep(HOURGLASS, points[:1], out, common={"run.t_end": 0.2},
-                     resume=False)[0]["status"] == "ran"
+                     resume=False, study=study)[0]["status"] == "ran"
     assert run_sweep(HOURGLASS, points[:1], out,
                      common={"run.t_end": 0.2})[0]["status"] == "skipped"
     # ... and so does other package code (a changed default must not pass stale
     # results off as current)
     monkeypatch.setattr(sweep_module, "code_digest", lambda: "0" * 64)
     assert run_sweep(HOURGLASS, points[:1], out,
-                     common={"run.t_end": 0.2})[0]["status"] == "ran"
+                     common={"run.t_end": 0.2}, study=study)[0]["status"] == "ran"
 
 
 def test_run_sweep_refuses_bad_points_before_running(tmp_path):

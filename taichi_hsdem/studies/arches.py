@@ -30,7 +30,7 @@ it broke, or that it held) and writes it to its folder's ``arches.csv``.
 * a **run folder** (``summary.json`` and ``arches.csv``): one line per
   realization (the arches formed, how the broken ones failed, the one that held:
   its particles and position) and a total line;
-* a finished ``tools/figures.py`` **figure folder** (``figure.json``; every
+* a finished ``python -m taichi_hsdem figures`` **figure folder** (``figure.json``; every
   realization's final state kept in its point files, ``<out>/points/``): per
   clogged realization it finds the arch of the final state and sorts its
   contacts, and writes ``DIR/arches.csv`` (one row per clogged realization),
@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import csv
 import heapq
+import io
 import json
 import math
 import sys
@@ -362,26 +363,51 @@ def _point_models(folder: Path):
     try:
         fig = json.loads((folder / "figure.json").read_text())
     except (OSError, ValueError) as exc:
-        raise ArchError(f"{folder}: no readable figure.json ({exc}); run tools/figures.py "
-                        f"into it first") from None
+        raise ArchError(f"{folder}: no readable figure.json ({exc}); run python -m "
+                        f"taichi_hsdem figures into it first") from None
     from .points import Point, point_file
+    problem = _figure_json_problem(fig)
+    if problem:
+        raise ArchError(f"{folder / 'figure.json'}: {problem}: not the figure.json of a "
+                        "finished figure (python -m taichi_hsdem figures writes it)")
     try:
-        base = load_scene(fig["scene"], list(fig.get("base_overrides") or []))
+        base = load_scene(fig["scene"], [str(o) for o in fig.get("base_overrides") or []])
+        scenes = [base.with_values(dict(p["overrides"])) for p in fig["points"]]
     except SceneError as exc:
         raise ArchError("; ".join(exc.problems)) from None
     out = []
-    for p in fig["points"]:
-        scene = base.with_values(dict(p["overrides"]))
-        path = point_file(folder, Point(p["label"], p["values"], scene))
+    for p, scene in zip(fig["points"], scenes):
+        path = point_file(folder, Point(str(p["label"]), p["values"], scene))
         try:
             data = json.loads(path.read_text())
         except (OSError, ValueError):
             raise ArchError(f"{path}: missing or unreadable; rerun the figure") from None
+        if not isinstance(data, dict) or not isinstance(data.get("rows"), list):
+            raise ArchError(f"{path}: not a point file of a figure (no \"rows\"); rerun the "
+                            "figure")
         if not data.get("finals"):
             raise ArchError(f"{path}: no final states (point files written before they were "
                             f"kept); rerun the figure with --no-resume")
         out.append((p["label"], resolve(scene.with_values({"run.realizations": 1})), data))
     return out
+
+
+def _figure_json_problem(fig) -> str | None:
+    """What a figure.json lacks that :func:`_point_models` reads, or None."""
+    if not isinstance(fig, dict):
+        return "not a JSON object"
+    if not isinstance(fig.get("scene"), str) or not fig["scene"]:
+        return 'no "scene" (the base scene file)'
+    if not isinstance(fig.get("base_overrides") or [], list):
+        return '"base_overrides" is not a list'
+    points = fig.get("points")
+    if not isinstance(points, list):
+        return 'no "points" list'
+    for k, p in enumerate(points):
+        if not (isinstance(p, dict) and isinstance(p.get("label"), str)
+                and isinstance(p.get("values"), dict) and isinstance(p.get("overrides"), dict)):
+            return f'point {k} lacks its "label", "values" or "overrides"'
+    return None
 
 
 def analyse_folder(folder, tol=DEFAULT_TOL, angle=DEFAULT_ANGLE):
@@ -626,14 +652,56 @@ def main(argv=None, prog: str = "python -m taichi_hsdem arches") -> int:
     except ArchError as exc:
         print(str(exc), file=sys.stderr)
         return 2
-    with open(folder / "arches.csv", "w", newline="") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(COLUMNS)
-        for _, rows, _, _ in result:
-            for r in rows:
-                w.writerow([r.get(k, "") for k in COLUMNS])
+    from .folder import StudyFolder, StudyFolderError
+    try:
+        name = _figure_name(folder)
+        with StudyFolder(folder, f"figures {name}" if name else "figures", key=str(folder),
+                         legacy=_legacy_files) as study:
+            study.refuse_foreign(FILES, "the arch census")
+            study.claim(FILES)
+            _write(folder, result, examples, tol)
+    except StudyFolderError as exc:
+        print("\n".join(exc.problems), file=sys.stderr)
+        return 2
+    return 0
+
+
+#: The files the census of a figure folder writes there.
+FILES = ("arches.csv", "arches.png")
+
+
+def _figure_name(folder: Path):
+    try:
+        return json.loads((folder / "figure.json").read_text()).get("figure")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def _legacy_files(folder: Path) -> list[str]:
+    """The figure's files and the census's in a figure folder of an earlier
+    version (no study manifest), told by what they hold."""
+    from .figures import _legacy_files as figure_files
+    name = _figure_name(folder)
+    names = list(figure_files(name)(folder)) if name else []
+    try:
+        with open(folder / "arches.csv", encoding="utf-8", errors="replace") as fh:
+            if names and fh.readline().rstrip("\n") == ",".join(COLUMNS):
+                names += [n for n in FILES if (folder / n).exists()]
+    except OSError:
+        pass
+    return names
+
+
+def _write(folder: Path, result, examples: int, tol: float):
+    from ..output import atomic_write
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(COLUMNS)
+    for _, rows, _, _ in result:
+        for r in rows:
+            w.writerow([r.get(k, "") for k in COLUMNS])
+    atomic_write(folder / "arches.csv", buf.getvalue())
     for label, rows, _, _ in result:
         print(summary_line(label, rows))
     draw(result, folder / "arches.png", examples, tol)
     print(f"wrote {folder}/arches.csv, arches.png")
-    return 0

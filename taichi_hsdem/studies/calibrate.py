@@ -447,6 +447,29 @@ def run_realizations(scene) -> tuple[list[dict], float]:
 
 
 QUICK_REALIZATIONS, QUICK_ROUNDS, QUICK_T_FRACTION = 4, 3, 0.1
+#: The files a calibration writes in its folder.
+CALIBRATION_FILES = ("calibration.csv", "calibration.json")
+
+
+def _legacy_files(out: Path) -> list[str]:
+    """The files a calibration of an earlier version (no study manifest) wrote in
+    ``out``, told by what they hold."""
+    names = []
+    try:
+        with open(out / "calibration.csv", encoding="utf-8", errors="replace") as fh:
+            if fh.readline().startswith("round,value,seed,"):
+                names.append("calibration.csv")
+    except OSError:
+        pass
+    try:
+        data = json.loads((out / "calibration.json").read_text())
+        if isinstance(data, dict) and {"scene", "param"} <= set(data):
+            names.append("calibration.json")
+    except (OSError, ValueError):
+        pass
+    return names
+
+
 CSV_COLUMNS = ("round", "value", "seed", "n", "n_unstable", "n_clogged", "escapees_total",
                "mean_escapees", "mean_escapees_ci_lo", "mean_escapees_ci_hi",
                "wall_time_s")
@@ -514,7 +537,6 @@ def main(argv=None, prog: str = "python -m taichi_hsdem calibrate") -> int:
         for line in problems:
             print(f"{prog}: {line}", file=sys.stderr)
         return EXIT_INVALID
-    from ..runner import RunFailed
     from ..scene import SceneError
     from .cluster import Cluster, ClusterError
 
@@ -535,7 +557,22 @@ def main(argv=None, prog: str = "python -m taichi_hsdem calibrate") -> int:
             print(line, file=sys.stderr)
         return EXIT_INVALID
     out = Path(args.out) if args.out else Path("runs") / f"calibrate_{scene.name}"
-    out.mkdir(parents=True, exist_ok=True)
+    from .folder import StudyFolder, StudyFolderError
+    try:
+        with StudyFolder(out, "calibrate", legacy=_legacy_files) as folder:
+            folder.refuse_foreign(CALIBRATION_FILES, "the calibration")
+            folder.claim(CALIBRATION_FILES)
+            return _calibrate_into(out, args, sets, realizations, rounds, evaluate, pool)
+    except StudyFolderError as exc:
+        for line in exc.problems:
+            print(line, file=sys.stderr)
+        return EXIT_INVALID
+
+
+def _calibrate_into(out: Path, args, sets, realizations, rounds, evaluate, pool) -> int:
+    """:func:`main`'s calibration, in its checked and locked folder ``out``."""
+    from ..runner import RunFailed
+    from .cluster import ClusterError
     table = out / "calibration.csv"
 
     def say(message):
@@ -581,7 +618,8 @@ def main(argv=None, prog: str = "python -m taichi_hsdem calibrate") -> int:
         return EXIT_INVALID if exc.kind == "invalid" else EXIT_FAILED
     report = {"scene": args.scene, "param": args.param, "set": sets,
               "realizations_per_round": realizations, **cal.to_dict()}
-    (out / "calibration.json").write_text(json.dumps(report, indent=1) + "\n")
+    from ..output import atomic_write
+    atomic_write(out / "calibration.json", json.dumps(report, indent=1) + "\n")
     if cal.converged:
         say(f"{args.param}: {cal.message} -> {out / 'calibration.json'}")
         return EXIT_OK

@@ -30,6 +30,10 @@ into ``--out`` (default ``runs/figures/<command>/``):
     same (``--no-resume`` runs everything again), so an interrupted figure loses
     at most the point it was running.
 
+The folder is locked while a figure writes it, and holds one figure's results:
+files of these names that no figure wrote there (the user's) are never replaced,
+and another figure's folder is refused (:mod:`.folder`; exit 2, one line).
+
 Commands
 --------
 ``escapees-time`` (Fig. 8)
@@ -106,6 +110,7 @@ from .points import (DEFAULT_POINTS, DEFAULT_REALIZATIONS, FIGURES, PAPER_REALIZ
                      QUICK_POINTS, SPEC, FigureError, PointRun, base_scene, build_points,
                      load_point, point_file, point_key, run_point, save_point, series_by_seed)
 from .cluster import Cluster, ClusterError
+from .folder import StudyFolder, StudyFolderError, point_folder_problem
 from .plots import pyplot, render
 from ..scene import SceneError
 from ..exits import Parser
@@ -352,93 +357,125 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
             raise FigureError(f"points {owner[path.name]!r} and {p.label!r} would share "
                               f"{path.name}: give distinct values")
         owner[path.name] = p.label
-    out.mkdir(parents=True, exist_ok=True)
-    code_digest()                  # this process's code, before any point runs
-    say = log or (lambda msg: None)
-    say(f"{command}: {len(points)} point(s) x {realizations} realization(s), t_end = "
-        f"{base.run.t_end:g} s{' (quick)' if quick else ''} -> {out}")
-    t0 = time.perf_counter()
-    runs = [None] * len(points)
-    keys = [point_key(p, realizations) for p in points]
-    todo = []
-    for k, (p, path) in enumerate(zip(points, kept_files)):
-        kept = load_point(path, keys[k], p) if resume else None
-        if kept is not None:
-            say(f"[{k + 1}/{len(points)}] {p.label}: finished earlier, read from {path}")
-            runs[k] = kept
-        else:
-            todo.append(k)
+    names = [f.relative_to(out).as_posix() for f in kept_files] + figure_files(command)
+    with StudyFolder(out, f"figures {command}", legacy=_legacy_files(command)) as folder:
+        problem = point_folder_problem(out / "points")
+        if problem:
+            raise StudyFolderError(problem.replace("a point's folder", "the points' folder"))
+        folder.refuse_foreign(names, "the figure")
+        folder.claim(names)
+        code_digest()                  # this process's code, before any point runs
+        say = log or (lambda msg: None)
+        say(f"{command}: {len(points)} point(s) x {realizations} realization(s), t_end = "
+            f"{base.run.t_end:g} s{' (quick)' if quick else ''} -> {out}")
+        t0 = time.perf_counter()
+        runs = [None] * len(points)
+        keys = [point_key(p, realizations) for p in points]
+        todo = []
+        for k, (p, path) in enumerate(zip(points, kept_files)):
+            kept = load_point(path, keys[k], p) if resume else None
+            if kept is not None:
+                say(f"[{k + 1}/{len(points)}] {p.label}: finished earlier, read from {path}")
+                runs[k] = kept
+            else:
+                todo.append(k)
 
-    def finished(i, run):
-        k = todo[i]
-        if not run.error:
-            save_point(kept_files[k], keys[k], run)
-        runs[k] = run
-        print(summary_line(command, run, _point_row(command, run)), flush=True)
-
-    if todo:
-        say(f"running {len(todo)} point(s)" + (f" on the cluster {cluster}" if cluster else ""))
-    with Cluster(cluster) as pool:
-        pool.run(run_point, [(points[k], int(realizations), batch, say if not cluster else None)
-                             for k in todo], finished)
-    for k, run in enumerate(runs):
-        if k not in todo:
+        def finished(i, run):
+            k = todo[i]
+            if not run.error:
+                save_point(kept_files[k], keys[k], run)
+            runs[k] = run
             print(summary_line(command, run, _point_row(command, run)), flush=True)
-    rows = [_point_row(command, run) for run in runs]
-    wall = time.perf_counter() - t0
 
-    files = []
-    real_rows = []
-    for run in runs:
-        for r in run.rows:
-            real_rows.append({"label": run.point.label, **run.point.values, **r})
-    write_csv(out / "realizations.csv", real_rows,
-              ["label", *points[0].values.keys(), "seed", "escapees", "clogged", "t_clog",
-               "t_stop", "status", "reason"])
-    files.append(out / "realizations.csv")
-    write_csv(out / "points.csv", rows)
-    files.append(out / "points.csv")
-    meta = (f"taichi_hsdem figures {command}: {realizations} realization(s)/point, t_end "
-            f"{base.run.t_end:g} s{', QUICK (not the paper statistics)' if quick else ''}")
-    png = out / f"{command}.png"
-    pmfs = []
-    if command != "escapees-time":
-        pmf_rows = []
+        if todo:
+            say(f"running {len(todo)} point(s)" + (f" on the cluster {cluster}" if cluster else ""))
+        with Cluster(cluster) as pool:
+            pool.run(run_point, [(points[k], int(realizations), batch, say if not cluster else None)
+                                 for k in todo], finished)
+        for k, run in enumerate(runs):
+            if k not in todo:
+                print(summary_line(command, run, _point_row(command, run)), flush=True)
+        rows = [_point_row(command, run) for run in runs]
+        wall = time.perf_counter() - t0
+
+        files = []
+        real_rows = []
         for run in runs:
-            s, c = run.samples()
-            bins = stats.pmf_bins(s, c) if s.size else []
-            pmfs.append(bins)
-            for b in bins:
-                pmf_rows.append({"label": run.point.label, **run.point.values, **b})
-        write_csv(out / "pmf.csv", pmf_rows,
-                  ["label", *points[0].values.keys(), "x", "pmf", "stderr", "count", "s_lo",
-                   "s_hi", "mean_s", "bin_width_x", "n_clogged"])
-        files.append(out / "pmf.csv")
-    if command == "escapees-time":
-        srows = []
-        for run, row in zip(runs, rows):
-            phi = run.point.values["phi"]
-            for seed_, t, s in sorted(run.series):
-                srows.append({"phi": phi, "seed": seed_, "t": t, "escapees": s,
-                              "theory_escapees": float(theory_escapees(
-                                  phi, t, row["flow_rate"], row["gap"], row["d_eq"]))})
-        write_csv(out / "series.csv", srows, ["phi", "seed", "t", "escapees", "theory_escapees"])
-        files.append(out / "series.csv")
-    render(command, runs, rows, pmfs, png, meta)
-    files.append(png)
-    info = {"figure": command, "argv": list(argv) if argv is not None else None,
-            "quick": bool(quick), "realizations_per_point": int(realizations),
-            "scene": base.source, "t_end": base.run.t_end, "base_overrides": overrides,
-            "wall_time_s": wall,
-            "points": [{"label": r.point.label, "values": r.point.values,
-                        "overrides": {k: v for k, v in r.point.overrides.items()},
-                        "wall_s": r.wall, "error": r.error, "info": r.info,
-                        "resumed": r.resumed} for r in runs]}
-    atomic_write(out / "figure.json", json.dumps(json_safe(info), indent=1, allow_nan=False)
-                 + "\n")
-    files.append(out / "figure.json")
-    print(f"wrote {out}/: " + ", ".join(f.name for f in files) + f" ({wall:.1f} s)", flush=True)
-    return {"out": out, "files": files, "points": rows, "runs": runs}
+            for r in run.rows:
+                real_rows.append({"label": run.point.label, **run.point.values, **r})
+        write_csv(out / "realizations.csv", real_rows,
+                  ["label", *points[0].values.keys(), "seed", "escapees", "clogged", "t_clog",
+                   "t_stop", "status", "reason"])
+        files.append(out / "realizations.csv")
+        write_csv(out / "points.csv", rows)
+        files.append(out / "points.csv")
+        meta = (f"taichi_hsdem figures {command}: {realizations} realization(s)/point, t_end "
+                f"{base.run.t_end:g} s{', QUICK (not the paper statistics)' if quick else ''}")
+        png = out / f"{command}.png"
+        pmfs = []
+        if command != "escapees-time":
+            pmf_rows = []
+            for run in runs:
+                s, c = run.samples()
+                bins = stats.pmf_bins(s, c) if s.size else []
+                pmfs.append(bins)
+                for b in bins:
+                    pmf_rows.append({"label": run.point.label, **run.point.values, **b})
+            write_csv(out / "pmf.csv", pmf_rows,
+                      ["label", *points[0].values.keys(), "x", "pmf", "stderr", "count", "s_lo",
+                       "s_hi", "mean_s", "bin_width_x", "n_clogged"])
+            files.append(out / "pmf.csv")
+        if command == "escapees-time":
+            srows = []
+            for run, row in zip(runs, rows):
+                phi = run.point.values["phi"]
+                for seed_, t, s in sorted(run.series):
+                    srows.append({"phi": phi, "seed": seed_, "t": t, "escapees": s,
+                                  "theory_escapees": float(theory_escapees(
+                                      phi, t, row["flow_rate"], row["gap"], row["d_eq"]))})
+            write_csv(out / "series.csv", srows, ["phi", "seed", "t", "escapees", "theory_escapees"])
+            files.append(out / "series.csv")
+        render(command, runs, rows, pmfs, png, meta)
+        files.append(png)
+        info = {"figure": command, "argv": list(argv) if argv is not None else None,
+                "quick": bool(quick), "realizations_per_point": int(realizations),
+                "scene": base.source, "t_end": base.run.t_end, "base_overrides": overrides,
+                "wall_time_s": wall,
+                "points": [{"label": r.point.label, "values": r.point.values,
+                            "overrides": {k: v for k, v in r.point.overrides.items()},
+                            "wall_s": r.wall, "error": r.error, "info": r.info,
+                            "resumed": r.resumed} for r in runs]}
+        atomic_write(out / "figure.json", json.dumps(json_safe(info), indent=1, allow_nan=False)
+                     + "\n")
+        files.append(out / "figure.json")
+        print(f"wrote {out}/: " + ", ".join(f.name for f in files) + f" ({wall:.1f} s)", flush=True)
+        return {"out": out, "files": files, "points": rows, "runs": runs}
+
+
+def figure_files(command: str) -> list[str]:
+    """The files a figure writes in its folder (beside ``points/``)."""
+    names = ["realizations.csv", "points.csv", f"{command}.png", "figure.json"]
+    names.append("series.csv" if command == "escapees-time" else "pmf.csv")
+    return names
+
+
+def _legacy_files(command: str):
+    """The names a figure of an earlier version (no study manifest) wrote in a
+    folder, told by its ``figure.json``: its files and point files present."""
+    def legacy(out: Path) -> list[str]:
+        try:
+            info = json.loads((out / "figure.json").read_text())
+        except (OSError, ValueError):
+            return []
+        if not (isinstance(info, dict) and info.get("figure") == command):
+            return []
+        names = [n for n in figure_files(command) if (out / n).exists()]
+        try:
+            names += [f"points/{p.name}" for p in (out / "points").glob("*.json")]
+        except OSError:
+            pass
+        return names
+    return legacy
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
@@ -504,7 +541,7 @@ def main(argv=None, prog: str = "python -m taichi_hsdem figures") -> int:
                          out=args.out, sets=args.set, scene=args.scene, seed=args.seed,
                          batch=args.batch, opts=_opts_from_args(args.figure, args), log=log,
                          argv=argv, resume=args.resume, cluster=args.cluster)
-    except (FigureError, ClusterError) as exc:
+    except (FigureError, ClusterError, StudyFolderError) as exc:
         for line in getattr(exc, "problems", [str(exc)]):
             print(line, file=sys.stderr)
         return 2

@@ -12,6 +12,15 @@ of the same scene (base file, common and point overrides, compared as the
 validated scene text) run by the same code (a digest of the package's sources) is
 skipped; a folder without one, or with another scene's or code's, is run again.
 
+The output folder follows :mod:`.folder`: it is locked while the sweep writes (a
+second sweep, figure or run into it is refused), ``sweep.csv`` and ``index.json``
+are replaced only when a sweep wrote them, a point's files only when a run or
+sweep of taichi_hsdem wrote them (the run's manifest, in each point's folder), and
+a finished point of another sweep file (or a plain run's result) is never run
+again into its folder. A grid of more than ``MAX_POINTS`` (10,000) points is
+refused, with its count, before it is built. Each refusal is one line, exit 2,
+nothing run.
+
 A sweep file (TOML)::
 
     scene = "../scenes/hourglass24.toml"   # relative to this file
@@ -59,6 +68,8 @@ import hashlib
 import io
 import itertools
 import json
+import math
+import os
 import re
 import sys
 from dataclasses import dataclass
@@ -71,6 +82,7 @@ from ..scene.toml import toml_value
 from ..digest import code_digest
 from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
 from .cluster import Cluster
+from .folder import StudyFolder, StudyFolderError, point_folder_problem
 
 __all__ = [
     "SweepError", "Sweep", "load_sweep", "expand_grid", "point_folder", "run_sweep",
@@ -79,6 +91,11 @@ __all__ = [
 
 SUMMARY, SERIES, RESOLVED = "summary.json", "escapees.csv", "scene.resolved.toml"
 SWEEP_CSV, INDEX = "sweep.csv", "index.json"
+#: The most points a sweep takes (grid and ``[[points]]`` together): a grid
+#: larger than this is refused, with its point count, before it is built.
+MAX_POINTS = 10_000
+#: The files a point writes into its folder.
+POINT_FILES = (RESOLVED, SERIES, "final_state.npz", SUMMARY)
 #: Folder names longer than this are cut and given a hash of the overrides.
 MAX_FOLDER_NAME = 100
 #: ``quick``: this fraction of each point's ``run.t_end``, at most this many realizations.
@@ -152,14 +169,31 @@ def point_folder(point: Mapping[str, Any]) -> str:
     return name
 
 
+def grid_size(grid: Mapping[str, Sequence]) -> int:
+    """The number of points of ``{key: [values]}`` (the product of the list
+    lengths), without building them."""
+    return math.prod(len(values) for values in grid.values())
+
+
+def _too_many(n: int, what: str) -> str:
+    return (f"{what} makes {n:,} points, more than the {MAX_POINTS:,} a sweep takes: "
+            "use fewer values per key, or split the sweep into several files")
+
+
 def expand_grid(grid: Mapping[str, Sequence]) -> list[dict[str, Any]]:
     """Cartesian product of ``{key: [values]}``, the last key varying fastest.
+
+    Raises :class:`SweepError` (nothing built) when the product holds more than
+    ``MAX_POINTS`` points.
 
     Examples
     --------
     >>> expand_grid({"a": [1, 2], "b": [0.5]})
     [{'a': 1, 'b': 0.5}, {'a': 2, 'b': 0.5}]
     """
+    n = grid_size(grid)
+    if n > MAX_POINTS:
+        raise SweepError(_too_many(n, "the grid"))
     keys = list(grid)
     return [dict(zip(keys, combo)) for combo in itertools.product(*(grid[k] for k in keys))]
 
@@ -238,11 +272,19 @@ def load_sweep(path: str | Path) -> Sweep:
                     grid[key] = values
         else:
             bad("grid", "expected a table of lists ([grid])")
-    points: list[dict] = expand_grid(grid) if grid else []
     explicit = raw.get("points", [])
     if not isinstance(explicit, list) or not all(isinstance(p, Mapping) for p in explicit):
         bad("points", "expected an array of tables ([[points]])")
+        explicit = []
+    n_grid = grid_size(grid) if grid else 0
+    points: list[dict] = []
+    if n_grid + len(explicit) > MAX_POINTS:
+        bad("grid" if n_grid > MAX_POINTS else "points",
+            _too_many(n_grid + len(explicit), "the [grid]" + (
+                f" ({' x '.join(str(len(v)) for v in grid.values())} values)" if grid else "")
+                + (" with the [[points]]" if explicit else "")))
     else:
+        points = expand_grid(grid) if grid else []
         points += [_flatten(p) for p in explicit]
     if not points and not problems:
         bad("grid", "nothing to sweep: add a [grid] of lists or [[points]] tables")
@@ -405,7 +447,7 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
               out_dir: str | Path, resume: bool = True,
               progress: Callable[[str], None] | None = None,
               common: Mapping[str, Any] | None = None, quick: bool = False,
-              cluster: str | None = None) -> list[dict]:
+              cluster: str | None = None, study: str | None = None) -> list[dict]:
     """Run ``base_scene_path`` at every point; write one folder per point.
 
     Parameters
@@ -432,6 +474,10 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
     cluster : str, optional
         Run the points on a Dask cluster (:mod:`.cluster`): a scheduler address or
         ``"local[:N]"``; the folders must be on a file system the workers share.
+    study : str, optional
+        What the sweep is (the command line gives its sweep file's path; default
+        the base scene's path): a finished point of another study is never run
+        again into its folder (:class:`StudyFolderError`).
 
     Returns
     -------
@@ -449,6 +495,10 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
     ------
     SweepError
         A point is not a valid scene (every problem listed; nothing is run).
+    StudyFolderError
+        ``out_dir`` cannot be used (a file, a dangling link, another study writing
+        it, a file of the user's with a result name, a finished point of another
+        study): one line, nothing is run.
     """
     base = Path(base_scene_path)
     common = dict(common or {})
@@ -459,21 +509,32 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
                                                       **quick_overrides(scene)}))
                   for point, scene in zip(points, scenes)]
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    study = study or f"scene {base.resolve()}"
+    with StudyFolder(out, "sweep", legacy=_legacy_files) as folder:
+        folder.refuse_foreign([SWEEP_CSV, INDEX], "the sweep")
+        keys = [_scene_key(scene) for scene in scenes]
+        _check_point_folders(out, points, keys, study, resume)
+        folder.claim([SWEEP_CSV, INDEX])
+        return _run_points(out, base, points, scenes, keys, common, study, resume, progress,
+                           cluster)
+
+
+def _run_points(out, base, points, scenes, keys, common, study, resume, progress,
+                cluster) -> list[dict]:
+    """:func:`run_sweep`'s work, in its checked and locked folder ``out``."""
     code_digest()                  # this process's code, before any point runs
     say = progress or (lambda message: None)
     total = len(points)
     rows: list = [None] * total
     tasks, where_of = [], []
-    for k, (point, scene) in enumerate(zip(points, scenes)):
+    for k, (point, scene, key) in enumerate(zip(points, scenes, keys)):
         folder = point_folder(point)
-        key = _scene_key(scene)
         done = _finished_summary(out / folder, key) if resume else None
         if done is not None:
             say(f"[{k + 1}/{total}] {folder}: skipped (finished)")
             rows[k] = _row(folder, point, "skipped", done)
             continue
-        tasks.append((scene, point, common, str(base), str(out / folder), key))
+        tasks.append((scene, point, common, str(base), str(out / folder), key, study))
         where_of.append(k)
     if tasks:
         say(f"running {len(tasks)} point(s)" + ("" if cluster is None else
@@ -498,16 +559,88 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
     return rows
 
 
+def _legacy_files(out: Path) -> list[str]:
+    """``sweep.csv`` and ``index.json`` of a sweep from before the study manifest,
+    told by what they hold."""
+    names = []
+    try:
+        index = json.loads((out / INDEX).read_text())
+        if isinstance(index, dict) and isinstance(index.get("points"), dict) \
+                and "scene" in index:
+            names.append(INDEX)
+    except (OSError, ValueError):
+        pass
+    try:
+        with open(out / SWEEP_CSV, encoding="utf-8", errors="replace") as fh:
+            if fh.readline().startswith("folder,status,"):
+                names.append(SWEEP_CSV)
+    except OSError:
+        pass
+    return names
+
+
+def _point_study(summary: dict) -> str | None:
+    sweep = summary.get("sweep")
+    return sweep.get("study") if isinstance(sweep, dict) else None
+
+
+def _check_point_folders(out: Path, points, keys, study: str, resume: bool):
+    """Refuse (:class:`StudyFolderError`, one line) a point whose folder is a file
+    or a dangling link, holds a file of a point's result name that no run of
+    taichi_hsdem wrote, or holds the finished result of another study (a plain
+    run's, or another sweep file's) that this sweep would run again."""
+    from ..output import owned_files
+    for point, key in zip(points, keys):
+        where = out / point_folder(point)
+        problem = point_folder_problem(where)
+        if problem:
+            raise StudyFolderError(problem)
+        if not where.is_dir():
+            continue
+        mine = owned_files(where)
+        foreign = [n for n in POINT_FILES if os.path.lexists(where / n) and n not in mine]
+        if foreign:
+            raise StudyFolderError(
+                f"{where / foreign[0]}: not written by a run of taichi_hsdem, and the "
+                "sweep would replace it: move it, or choose another folder")
+        try:
+            summary = json.loads((where / SUMMARY).read_text())
+        except (OSError, ValueError):
+            continue                      # no finished result here
+        if not isinstance(summary, dict) or (resume and _finished_summary(where, key)):
+            continue                      # skipped, not rewritten
+        if not isinstance(summary.get("sweep"), dict):
+            raise StudyFolderError(
+                f"{where}: holds the finished result of a run (not of a sweep), which this "
+                "sweep would replace: move it, or choose another folder")
+        other = _point_study(summary)
+        if other is not None and other != study:
+            raise StudyFolderError(
+                f"{where}: holds a finished point of another sweep ({other}), which this "
+                "one would replace: choose another folder, or remove that point's folder")
+
+
+def _write_point_manifest(where: Path, names):
+    """The run's manifest (:data:`taichi_hsdem.output.MANIFEST`) in a point's
+    folder, so that runs and sweeps alike know these files as theirs."""
+    from ..output import MANIFEST
+    atomic_write(where / MANIFEST, json.dumps({"files": sorted(names)}) + "\n")
+
+
 def run_point(scene: Scene, point: Mapping, common: Mapping, base: str, where: str,
-              key: str) -> tuple[str, dict | None, str | None]:
+              key: str, study: str | None = None) -> tuple[str, dict | None, str | None]:
     """Run one point of a sweep into folder ``where`` (here or on a cluster worker):
     ``(status, summary as written or None, message)``."""
     # the simulator loads Taichi (about a second): only once there is something to run
     from ..output import FINAL_STATE, write_final_state, write_resolved_scene, write_series, \
         write_summary
+    from ..output import owned_files
     from ..runner import RunFailed, build, execute, unstable_message
     where = Path(where)
     where.mkdir(parents=True, exist_ok=True)
+    # listed before they are written, so that a point cut short leaves no file of
+    # ours unlisted
+    _write_point_manifest(where, owned_files(where) | set(POINT_FILES))
     # A result of other overrides left here must not pass for this point's.
     (where / SUMMARY).unlink(missing_ok=True)
     (where / FINAL_STATE).unlink(missing_ok=True)
@@ -522,11 +655,13 @@ def run_point(scene: Scene, point: Mapping, common: Mapping, base: str, where: s
         return "failed", None, "; ".join(error.lines)
     summary = result.summary
     summary["sweep"] = {"overrides": dict(point), "common": dict(common), "base_scene": base,
-                        "scene_sha256": key}
+                        "scene_sha256": key, "study": study}
     statuses = [r["status"] for r in summary["realizations"]]
     write_series(result.series, statuses, where)
     write_final_state(result, where)
     write_summary(summary, where)  # last: its presence marks the point finished
+    _write_point_manifest(where, {n for n in owned_files(where) | set(POINT_FILES)
+                                  if os.path.lexists(where / n)})
     summary = json.loads((where / SUMMARY).read_text())  # as later sweeps read it
     message = unstable_message(result)
     return ("unstable" if message else "ran"), summary, message
@@ -566,15 +701,24 @@ def main(argv=None, prog: str = "python -m taichi_hsdem sweep") -> int:
     if args.quick:
         out = out / "quick"
 
+    # said with the first progress line, once the folder is checked: a refused
+    # folder is one line
+    header = [f"{args.sweep}: {len(sweep.points)} point(s) of {sweep.scene} -> {out}"]
+
     def say(message):
         if not args.quiet:
+            while header:
+                print(header.pop(), file=sys.stderr, flush=True)
             print(message, file=sys.stderr, flush=True)
 
-    say(f"{args.sweep}: {len(sweep.points)} point(s) of {sweep.scene} -> {out}")
     try:
         rows = run_sweep(sweep.scene, list(sweep.points), out, resume=args.resume,
                          progress=say, common=sweep.common, quick=args.quick,
-                         cluster=args.cluster)
+                         cluster=args.cluster, study=str(Path(args.sweep).resolve()))
+    except StudyFolderError as exc:
+        for line in exc.problems:
+            print(line, file=sys.stderr)
+        return EXIT_INVALID
     except ClusterError as exc:
         print(exc, file=sys.stderr)
         return EXIT_INVALID
