@@ -4,12 +4,11 @@ CG iteration per kernel launch or a whole solve per realization, and the
 pressure and boundary fluxes read back. Package-internal: :mod:`.gmg` is the API."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 from ..backend import ti
-from ._gmg_cycle import (N_FLAGS, OVERCORRECTION, REAL, _ADIR, _ALPHA, _B, _BB, _BETA,
-                         _CHANGED, _CHECK, _Cells, _Chol, _FIRST, _KEEP, _TX, _TY,
-                         _Consts, _DIR, _Field, _Grid, _INLET, _ITERS, _Ints, _K_DX, _K_DY,
-                         _K_INFLOW, _K_PREF, _K_TOL2, _NX, _NY, _Ops, _PW, _RES, _RHS, _RR,
-                         _RUNNING, _RZ, _Rows, _SOL, _Sides, _TASK, _UNDRIVEN, _X, _apply,
-                         _cycle_of, _diagonal, _index, _lanes, _segment, _segments)
+from ._gmg_cycle import (N_FLAGS, OVERCORRECTION, REAL, _ADIR, _ALPHA, _B, _BB, _BETA, _CHECK,
+                         _Cells, _Chol, _FIRST, _TX, _TY, _Consts, _DIR, _Field, _Grid, _INLET,
+                         _ITERS, _Ints, _K_INFLOW, _K_PREF, _K_TOL2, _NX, _NY, _Ops, _PW, _RES,
+                         _RHS, _RR, _RUNNING, _RZ, _Rows, _SOL, _Sides, _TASK, _UNDRIVEN, _X,
+                         _apply, _cycle_of, _diagonal, _index, _lanes, _segment, _segments)
 from ._gmg_bodies import Terms, _product, _product_of
 
 #: The float32 solve also stops once its true residual is below this fraction of

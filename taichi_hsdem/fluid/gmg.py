@@ -111,9 +111,10 @@ from ._gmg_cg import (REPORT_COLUMNS, _REPORT_ACTIVE, _REPORT_FLAGS, _REPORT_FLU
 from ._gmg_cycle import (CG_ROWS, COARSEST_CELLS, MAXITER, N_CONSTS, N_FLAGS, REAL,
                          REALIZATION_CELLS, SERIAL_CELLS, SWEEPS, _BAD, _BB, _CHANGED, _ITERS,
                          _K_DX, _K_DY, _K_GX, _K_GY, _K_INFLOW, _K_PREF, _K_TOL2, _KEEP,
-                         _PARALLEL, _RES, _SOL, _SEGMENT, _SIDE_NAMES, _ZEROS, _assemble,
-                         _coarsen, _copy_rhs, _factor, _load_guess, _restrict, _scan,
-                         _serial_cycle, _set_carried_rhs, _smooth, _smooth_blocks, vec2)
+                         _PARALLEL, _RES, _SOL, _SEGMENT, _SIDE_NAMES, _ZEROS, _restrict,
+                         _serial_cycle, _smooth, _smooth_blocks, vec2)
+from ._gmg_setup import (_assemble, _coarsen, _copy_rhs, _factor, _load_guess, _scan,
+                         _set_carried_rhs)
 
 # The float32 solve (a backend without float64 kernels: Metal, most integrated
 # GPUs): its tolerance is at least F32_TOL_FLOOR, it also stops where its residual
