@@ -34,7 +34,7 @@ from .geometry.placement import find_free_spot
 from .geometry.throats import observe, throat_rows
 from .runstate import ArchRecord, RunState
 from .scene import Scene
-from .studies import arches as arch_geometry
+from .studies import arch_geometry
 from .version import __version__
 
 
@@ -311,7 +311,7 @@ class ArchCensus:
     Attributes
     ----------
     sides : Sides
-        The two side walls (:class:`~taichi_hsdem.studies.arches.Sides`).
+        The two side walls (:class:`~taichi_hsdem.studies.arch_geometry.Sides`).
     shapes, species : list, (N,) array
         The species' shapes and each body's species.
     radius : (N,) array
@@ -351,7 +351,7 @@ class ArchCensus:
     def chain(self, x, theta, alive):
         """The arch spanning the neck in one realization's state (x (N, 2), theta
         (N,), alive (N,)): its particles from the lower side wall up, or None
-        (:func:`~taichi_hsdem.studies.arches.arch_chain`, touching: gap at most
+        (:func:`~taichi_hsdem.studies.arch_geometry.arch_chain`, touching: gap at most
         ``DEFAULT_TOL`` bounding diameters; particles within :data:`CENSUS_REACH`
         of the neck)."""
         return arch_geometry.arch_chain(self.shapes, x, theta, alive, self.species, self.sides,

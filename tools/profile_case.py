@@ -63,7 +63,7 @@ def main(argv=None):
         p.error("--top must be at least 1 and --bandwidth positive")
     sim_time = args.sim_time
     if sim_time is None:
-        sim_time = 0.005 if args.case.startswith("channel") else 0.5
+        sim_time = 0.005 if args.case.startswith(("channel", "micromodel")) else 0.5
     if sim_time <= 0:
         p.error("--sim-time must be positive")
 

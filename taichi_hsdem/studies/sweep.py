@@ -63,26 +63,23 @@ from __future__ import annotations
 
 import argparse
 import csv
-import difflib
 import hashlib
 import io
-import itertools
 import json
-import math
 import os
-import re
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from ..output import atomic_write
-from ..scene import Scene, SceneError, load_scene, read_toml, scene_to_toml
-from ..scene.toml import toml_value
+from ..scene import Scene, load_scene, scene_to_toml
 from ..digest import code_digest
 from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
 from .cluster import Cluster
 from .folder import StudyFolder, StudyFolderError, point_folder_problem
+from .sweep_file import (MAX_POINTS, Sweep, SweepError, _check_points,  # noqa: F401
+                         _describe_point, _override_strings, _value_text, expand_grid,
+                         load_sweep, point_folder, quick_overrides)
 
 __all__ = [
     "SweepError", "Sweep", "load_sweep", "expand_grid", "point_folder", "run_sweep",
@@ -91,248 +88,8 @@ __all__ = [
 
 SUMMARY, SERIES, RESOLVED = "summary.json", "escapees.csv", "scene.resolved.toml"
 SWEEP_CSV, INDEX = "sweep.csv", "index.json"
-#: The most points a sweep takes (grid and ``[[points]]`` together): a grid
-#: larger than this is refused, with its point count, before it is built.
-MAX_POINTS = 10_000
 #: The files a point writes into its folder.
 POINT_FILES = (RESOLVED, SERIES, "final_state.npz", SUMMARY)
-#: Folder names longer than this are cut and given a hash of the overrides.
-MAX_FOLDER_NAME = 100
-#: ``quick``: this fraction of each point's ``run.t_end``, at most this many realizations.
-QUICK_T_FRACTION = 0.1
-QUICK_REALIZATIONS = 2
-_SWEEP_KEYS = ("scene", "description", "common", "grid", "points")
-
-
-class SweepError(SceneError):
-    """An invalid sweep (file, point or override); ``problems`` lists each one."""
-
-
-# --------------------------------------------------------------------------- points
-
-def _flatten(table: Mapping, prefix: str = "") -> dict[str, Any]:
-    """Nested tables to dotted keys; lists and scalars are values."""
-    out: dict[str, Any] = {}
-    for key, value in table.items():
-        path = f"{prefix}{key}"
-        if isinstance(value, Mapping):
-            out.update(_flatten(value, path + "."))
-        else:
-            out[path] = value
-    return out
-
-
-def _value_text(value: Any) -> str:
-    """A value as the user would type it after ``--set key=``."""
-    if isinstance(value, str):
-        return value
-    return toml_value(value)
-
-
-def _override_strings(overrides: Mapping[str, Any]) -> list[str]:
-    # TOML spelling, so that a string stays a string and a list a list.
-    return [f"{key}={toml_value(value)}" for key, value in overrides.items()]
-
-
-def _describe_point(point: Mapping[str, Any]) -> str:
-    return ", ".join(f"{k}={_value_text(v)}" for k, v in point.items()) or "(base scene)"
-
-
-def _digest(obj: Any, n: int = 8) -> str:
-    text = json.dumps(obj, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:n]
-
-
-def point_folder(point: Mapping[str, Any]) -> str:
-    """The folder name of a point: its overrides, keys sorted, e.g.
-    ``"particles.friction=0.4,run.seed=7"``; ``"base"`` for no override.
-
-    The name depends on the point alone, so it is the same in every sweep that
-    holds the point. Characters other than letters, digits and ``._=,+-`` become
-    ``_``; a name that needed such a change, or is longer than
-    ``MAX_FOLDER_NAME``, ends in a hash of the overrides so that two points never
-    share a folder.
-
-    Examples
-    --------
-    >>> point_folder({"run.seed": 7, "particles.friction": 0.4})
-    'particles.friction=0.4,run.seed=7'
-    """
-    if not point:
-        return "base"
-    items = sorted(point.items())
-    raw = ",".join(f"{k}={_value_text(v)}" for k, v in items)
-    name = re.sub(r"[^A-Za-z0-9._=,+-]", "_", raw)
-    if name != raw or len(name) > MAX_FOLDER_NAME:
-        tag = _digest([[k, v] for k, v in items])
-        name = name[:MAX_FOLDER_NAME - len(tag) - 1] + "-" + tag
-    return name
-
-
-def grid_size(grid: Mapping[str, Sequence]) -> int:
-    """The number of points of ``{key: [values]}`` (the product of the list
-    lengths), without building them."""
-    return math.prod(len(values) for values in grid.values())
-
-
-def _too_many(n: int, what: str) -> str:
-    return (f"{what} makes {n:,} points, more than the {MAX_POINTS:,} a sweep takes: "
-            "use fewer values per key, or split the sweep into several files")
-
-
-def expand_grid(grid: Mapping[str, Sequence]) -> list[dict[str, Any]]:
-    """Cartesian product of ``{key: [values]}``, the last key varying fastest.
-
-    Raises :class:`SweepError` (nothing built) when the product holds more than
-    ``MAX_POINTS`` points.
-
-    Examples
-    --------
-    >>> expand_grid({"a": [1, 2], "b": [0.5]})
-    [{'a': 1, 'b': 0.5}, {'a': 2, 'b': 0.5}]
-    """
-    n = grid_size(grid)
-    if n > MAX_POINTS:
-        raise SweepError(_too_many(n, "the grid"))
-    keys = list(grid)
-    return [dict(zip(keys, combo)) for combo in itertools.product(*(grid[k] for k in keys))]
-
-
-def quick_overrides(scene: Scene) -> dict[str, Any]:
-    """Overrides that make a smoke-test run of ``scene``: ``QUICK_T_FRACTION`` of
-    its ``run.t_end`` and at most ``QUICK_REALIZATIONS`` realizations."""
-    return {"run.t_end": QUICK_T_FRACTION * scene.run.t_end,
-            "run.realizations": min(QUICK_REALIZATIONS, scene.run.realizations)}
-
-
-@dataclass(frozen=True)
-class Sweep:
-    """A sweep file, read and checked: the base scene, the common overrides and
-    one dict of overrides per point (grid points first, then ``[[points]]``)."""
-
-    scene: Path
-    common: dict
-    points: tuple
-    source: str = "<dict>"
-    description: str = ""
-
-
-def load_sweep(path: str | Path) -> Sweep:
-    """Read a sweep file (module notes give the format) and check every point.
-
-    Every point is validated as a scene (``load_scene`` with the common and point
-    overrides) before anything runs.
-
-    Raises
-    ------
-    SweepError
-        With every problem, one ``"FILE: where: problem"`` line each.
-    """
-    path = Path(path)
-    raw = read_toml(path, "sweep", SweepError)
-    label = str(path)
-    problems: list[str] = []
-
-    def bad(where: str, message: str) -> None:
-        problems.append(f"{label}: {where}: {message}")
-
-    for key in raw:
-        if key not in _SWEEP_KEYS:
-            close = difflib.get_close_matches(key, _SWEEP_KEYS, n=1)
-            bad(key, "unknown key" + (f"; did you mean {close[0]!r}?" if close else
-                                      f"; expected one of {', '.join(_SWEEP_KEYS)}"))
-    scene_path = None
-    scene = raw.get("scene")
-    if scene is None:
-        bad("scene", 'missing: give the base scene file, e.g. scene = "scenes/x.toml"')
-    elif not isinstance(scene, str) or not scene.strip():
-        bad("scene", f"expected a path string, got {scene!r}")
-    else:
-        scene_path = Path(scene) if Path(scene).is_absolute() else path.parent / scene
-        if not scene_path.is_file():
-            bad("scene", f"{scene_path} (relative to the sweep file's folder) is not a file")
-    description = raw.get("description", "")
-    if not isinstance(description, str):
-        bad("description", f"expected a string, got {description!r}")
-
-    common: dict = {}
-    if "common" in raw:
-        if isinstance(raw["common"], Mapping):
-            common = _flatten(raw["common"])
-        else:
-            bad("common", "expected a table of overrides ([common])")
-    grid: dict = {}
-    if "grid" in raw:
-        if isinstance(raw["grid"], Mapping):
-            for key, values in _flatten(raw["grid"]).items():
-                if not isinstance(values, list) or not values:
-                    bad(f"grid.{key}", f"expected a non-empty list of values, got "
-                                       f"{values!r}")
-                else:
-                    grid[key] = values
-        else:
-            bad("grid", "expected a table of lists ([grid])")
-    explicit = raw.get("points", [])
-    if not isinstance(explicit, list) or not all(isinstance(p, Mapping) for p in explicit):
-        bad("points", "expected an array of tables ([[points]])")
-        explicit = []
-    n_grid = grid_size(grid) if grid else 0
-    points: list[dict] = []
-    if n_grid + len(explicit) > MAX_POINTS:
-        bad("grid" if n_grid > MAX_POINTS else "points",
-            _too_many(n_grid + len(explicit), "the [grid]" + (
-                f" ({' x '.join(str(len(v)) for v in grid.values())} values)" if grid else "")
-                + (" with the [[points]]" if explicit else "")))
-    else:
-        points = expand_grid(grid) if grid else []
-        points += [_flatten(p) for p in explicit]
-    if not points and not problems:
-        bad("grid", "nothing to sweep: add a [grid] of lists or [[points]] tables")
-    if problems:
-        raise SweepError(problems)
-    _check_points(scene_path, points, common, label)
-    return Sweep(scene=scene_path, common=common, points=tuple(points), source=label,
-                 description=description)
-
-
-def _check_points(scene_path, points, common, label) -> list[Scene]:
-    """Load every point's scene; raise one SweepError listing every problem."""
-    problems: list[str] = []
-    scenes = []
-    folders: dict[str, int] = {}
-    shared: set[str] = set()   # problems of [common], reported once
-    if common:
-        try:
-            load_scene(scene_path, _override_strings(common))
-        except SceneError as error:
-            shared = set(error.problems)
-            problems += [f"{label}: common: {line}" for line in error.problems]
-    for k, point in enumerate(points):
-        if not isinstance(point, Mapping) or not all(isinstance(key, str) for key in point):
-            problems.append(f"{label}: point {k}: expected a dict of dotted keys to "
-                            f"values, got {point!r}")
-            continue
-        where = f"{label}: point {k} ({_describe_point(point)})"
-        folder = point_folder(point)
-        if folder in folders:
-            problems.append(f"{where}: repeats point {folders[folder]}")
-            continue
-        folders[folder] = k
-        try:
-            scenes.append(load_scene(scene_path, _override_strings({**common, **point})))
-        except SceneError as error:
-            problems += [f"{where}: {line}" for line in error.problems
-                         if line not in shared]
-        except TypeError as error:  # a value TOML cannot spell
-            problems.append(f"{where}: {error}")
-    backends = {(s.run.arch, s.run.precision) for s in scenes}
-    if len(backends) > 1:
-        problems.append(f"{label}: run.arch and run.precision must be the same at every "
-                        f"point (one Taichi backend per process), got "
-                        f"{sorted(backends)}")
-    if problems:
-        raise SweepError(problems)
-    return scenes
 
 
 # ---------------------------------------------------------------------------- runs
