@@ -492,10 +492,11 @@ class CheckpointClock:
 
 class Pictures:
     """What a run draws while it goes: the video (and the live viewer), the ParaView
-    series, and at the end the plots; each into the staging folder."""
+    series, and at the end the plots; each into the staging folder. With
+    ``moving=False`` only the plots (a sweep's points)."""
 
     def __init__(self, sim, staged: Staging, view: bool = False, quiet: bool = False,
-                 resume_dir: Path | None = None):
+                 resume_dir: Path | None = None, moving: bool = True):
         self.sim, self.staged = sim, staged
         self.recorder = None
         self.vtk = None
@@ -503,6 +504,8 @@ class Pictures:
         #: what was asked for and could not be drawn (one line), once finished
         self.failed: str | None = None
         sc = sim.scene
+        if not moving:      # the plots only (a sweep's point): no video, viewer, series
+            return
         viewer = None
         if view:
             from .render.viewer import LiveViewer, display_available

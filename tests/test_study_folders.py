@@ -132,10 +132,13 @@ def test_points_resume_and_a_finished_point_is_never_rewritten_by_another_sweep(
     code, err = sweep([a, "--out", out], capsys)
     assert code == 0, err
     manifest = json.loads((out / STUDY_MANIFEST).read_text())
-    assert manifest == {"study": "sweep", "files": ["index.json", "sweep.csv"]}
+    assert manifest == {"study": "sweep", "files": ["index.json", "sweep.csv", "sweep.png"]}
     folder = out / POINT
-    assert set(json.loads((folder / output.MANIFEST).read_text())["files"]) == {
-        "summary.json", "escapees.csv", "final_state.npz", "scene.resolved.toml"}
+    # a point is a run into its folder: a run's files (no video), each in its manifest
+    listed = set(json.loads((folder / output.MANIFEST).read_text())["files"])
+    assert listed == {p.name for p in folder.iterdir() if not p.name.startswith(".")}
+    assert {"summary.json", "escapees.csv", "final_state.npz", "scene.resolved.toml",
+            "arches.csv", "escapees.png"} <= listed
     stamp = (folder / "summary.json").stat().st_mtime_ns
     summary = json.loads((folder / "summary.json").read_text())
     assert summary["sweep"]["study"] == str(a.resolve())

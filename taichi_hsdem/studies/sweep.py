@@ -3,10 +3,13 @@
 A *sweep* runs one base scene at several *points*, each a set of dotted overrides
 (``{"particles.friction": 0.4, "run.realizations": 10}``, the keys of ``--set``),
 in one process: Taichi is initialised once and its kernels compiled once for all
-points. Every point writes its own folder, named after its overrides
-(``particles.friction=0.4``), with ``summary.json``, ``final_state.npz``,
-``escapees.csv`` and ``scene.resolved.toml`` as a single run does; the sweep
-writes ``sweep.csv`` (the clogging statistics of every point, one row each) and
+points. Every point is a run into its own folder, named after its overrides
+(``particles.friction=0.4``), and writes what a run writes but the video and the
+ParaView series (``summary.json``, ``escapees.csv``, ``arches.csv``,
+``flow.csv``, ``final_state.npz``, ``scene.resolved.toml``, the plots), with a
+run's lock and staging; the sweep writes ``sweep.csv`` (the clogging statistics of
+every point, one row each), ``sweep.png`` (``<s>`` with its 95 % interval against
+the swept value, a lower bound where nothing clogged: :mod:`.sweep_plot`) and
 ``index.json`` (folder -> overrides). A sweep is resumable: a point whose folder holds a ``summary.json``
 of the same scene (base file, common and point overrides, compared as the
 validated scene text) run by the same code (a digest of the package's sources) is
@@ -49,12 +52,18 @@ Examples
 Command line::
 
     python -m taichi_hsdem sweep SWEEP.toml [--out DIR] [--resume | --no-resume]
-                                            [--quick] [--cluster ADDRESS] [--quiet]
+                                            [--set KEY=VALUE ...] [--quick]
+                                            [--cluster ADDRESS] [--quiet]
 
 (``python tools/sweep.py`` is the same.) Each point writes ``DIR/<overrides>/``;
 the sweep writes ``DIR/sweep.csv`` and ``DIR/index.json``, ``DIR`` defaulting to
-``runs/<sweep file name>/``. ``--quick`` runs each point for a tenth of its
-``run.t_end`` with at most two realizations, into ``DIR/quick/``. Exit status: 0
+``runs/<sweep file name>/``. ``--set KEY=VALUE`` overrides a key at every point
+(after ``[common]``; a key the points vary is refused). ``--quick`` runs each
+point with at most two realizations, each to its ``run.t_end`` (it clogs as the
+full point does; the statistics are wider), into ``DIR/quick/``; the points'
+``summary.json`` and ``index.json`` record what it set. Each point says how far
+its run is every 5 s, and each finished point how many are left and about how
+long they will take. Exit status: 0
 every point has its results; 1 a point failed or a realization went unstable (the
 other points are written); 2 the sweep file or a point is invalid (one line per
 problem; nothing is run).
@@ -66,8 +75,8 @@ import csv
 import hashlib
 import io
 import json
-import os
 import sys
+import time
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -79,7 +88,7 @@ from .cluster import Cluster
 from .folder import StudyFolder, StudyFolderError, point_folder_problem
 from .sweep_file import (MAX_POINTS, Sweep, SweepError, _check_points,  # noqa: F401
                          _describe_point, _override_strings, _value_text, expand_grid,
-                         load_sweep, point_folder, quick_overrides)
+                         command_line_sets, load_sweep, point_folder, quick_overrides)
 
 __all__ = [
     "SweepError", "Sweep", "load_sweep", "expand_grid", "point_folder", "run_sweep",
@@ -87,9 +96,7 @@ __all__ = [
 ]
 
 SUMMARY, SERIES, RESOLVED = "summary.json", "escapees.csv", "scene.resolved.toml"
-SWEEP_CSV, INDEX = "sweep.csv", "index.json"
-#: The files a point writes into its folder.
-POINT_FILES = (RESOLVED, SERIES, "final_state.npz", SUMMARY)
+SWEEP_CSV, INDEX, SWEEP_PNG = "sweep.csv", "index.json", "sweep.png"
 
 
 # ---------------------------------------------------------------------------- runs
@@ -185,9 +192,10 @@ def _write_table(rows: list[dict], out: Path) -> None:
     atomic_write(out / SWEEP_CSV, buf.getvalue())
 
 
-def _write_index(out: Path, base: Path, common: Mapping, entries: dict[str, dict]) -> None:
+def _write_index(out: Path, base: Path, common: Mapping, entries: dict[str, dict],
+                 quick: Mapping | None = None) -> None:
     """``index.json``: folder -> overrides, merged with what earlier sweeps into
-    the same folder recorded."""
+    the same folder recorded; ``quick``: folder -> what ``--quick`` set there."""
     index = {}
     try:
         old = json.loads((out / INDEX).read_text())
@@ -197,7 +205,8 @@ def _write_index(out: Path, base: Path, common: Mapping, entries: dict[str, dict
         pass
     index.update(entries)
     atomic_write(out / INDEX, json.dumps({"scene": str(base), "common": dict(common),
-                                          "points": index}, indent=1, default=str) + "\n")
+                                          "quick": dict(quick or {}), "points": index},
+                                         indent=1, default=str) + "\n")
 
 
 def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
@@ -215,18 +224,19 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
         Dotted overrides per point, e.g. ``{"particles.friction": 0.4}``
         (the keys and checks of ``--set``; values are Python values).
     out_dir : str or Path
-        Gets one folder per point (:func:`point_folder`), ``sweep.csv`` and
-        ``index.json``.
+        Gets one folder per point (:func:`point_folder`), ``sweep.csv``,
+        ``sweep.png`` and ``index.json``.
     resume : bool
         Skip a point whose folder already holds a complete ``summary.json`` of the
         same scene; ``False`` runs every point again.
     progress : callable, optional
-        Called with a one-line message as each point starts and ends.
+        Called with a one-line message as each point ends (with the points left
+        and an estimate of their time) and, run here, every 5 s of a point.
     common : dict, optional
         Overrides applied to every point before its own.
     quick : bool
-        Smoke test: each point run with :func:`quick_overrides` (a tenth of its
-        ``run.t_end``, at most two realizations); folder names do not change, so
+        Smoke test: each point run with :func:`quick_overrides` (at most two
+        realizations, each to its ``run.t_end``); folder names do not change, so
         give a separate ``out_dir``.
     cluster : str, optional
         Run the points on a Dask cluster (:mod:`.cluster`): a scheduler address or
@@ -261,23 +271,23 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
     common = dict(common or {})
     points = [dict(p) for p in points]
     scenes = _check_points(base, points, common, str(base))
+    quicks = [quick_overrides(scene) if quick else {} for scene in scenes]
     if quick:
-        scenes = [load_scene(base, _override_strings({**common, **point,
-                                                      **quick_overrides(scene)}))
-                  for point, scene in zip(points, scenes)]
+        scenes = [load_scene(base, _override_strings({**common, **point, **q}))
+                  for point, q in zip(points, quicks)]
     out = Path(out_dir)
     study = study or f"scene {base.resolve()}"
     with StudyFolder(out, "sweep", legacy=_legacy_files) as folder:
-        folder.refuse_foreign([SWEEP_CSV, INDEX], "the sweep")
+        folder.refuse_foreign([SWEEP_CSV, INDEX, SWEEP_PNG], "the sweep")
         keys = [_scene_key(scene) for scene in scenes]
         _check_point_folders(out, points, keys, study, resume)
-        folder.claim([SWEEP_CSV, INDEX])
+        folder.claim([SWEEP_CSV, INDEX, SWEEP_PNG])
         return _run_points(out, base, points, scenes, keys, common, study, resume, progress,
-                           cluster)
+                           cluster, quicks)
 
 
 def _run_points(out, base, points, scenes, keys, common, study, resume, progress,
-                cluster) -> list[dict]:
+                cluster, quicks) -> list[dict]:
     """:func:`run_sweep`'s work, in its checked and locked folder ``out``."""
     code_digest()                  # this process's code, before any point runs
     say = progress or (lambda message: None)
@@ -291,8 +301,12 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
             say(f"[{k + 1}/{total}] {folder}: skipped (finished)")
             rows[k] = _row(folder, point, "skipped", done)
             continue
-        tasks.append((scene, point, common, str(base), str(out / folder), key, study))
+        task = [scene, point, common, str(base), str(out / folder), key, study, quicks[k]]
+        if cluster is None and progress is not None:
+            task.append(_PointProgress(say, f"[{k + 1}/{total}] {folder}"))
+        tasks.append(tuple(task))
         where_of.append(k)
+    clock = _Eta(len(tasks))
     if tasks:
         say(f"running {len(tasks)} point(s)" + ("" if cluster is None else
                                                 f" on the cluster {cluster}"))
@@ -303,17 +317,66 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
         folder = point_folder(points[k])
         head = f"[{k + 1}/{total}] {folder}"
         rows[k] = _row(folder, points[k], status, summary, message)
+        left = clock.done()
         if summary is None:
-            say(f"{head}: {'refused' if status == 'invalid' else 'failed'}: {message}")
+            say(f"{head}: {'refused' if status == 'invalid' else 'failed'}: {message}{left}")
             return
         say(f"{head}: done in {summary['wall_time_s']:.1f} s, {point_text(rows[k])}"
-            + (f"; {message}" if message else ""))
+            + (f"; {message}" if message else "") + left)
 
     with Cluster(cluster) as pool:
         pool.run(run_point, tasks, finished)
-    _write_index(out, base, common, {row["folder"]: row["overrides"] for row in rows})
+    _write_index(out, base, common, {row["folder"]: row["overrides"] for row in rows},
+                 {point_folder(p): q for p, q in zip(points, quicks) if q})
     _write_table(rows, out)
+    from .sweep_plot import plot_sweep
+    if not plot_sweep(rows, out / SWEEP_PNG, title=f"{Path(base).stem}"
+                      + (" (quick: <= 2 realizations a point)" if any(quicks) else "")):
+        (out / SWEEP_PNG).unlink(missing_ok=True)      # no statistics: no stale plot
     return rows
+
+
+class _Eta:
+    """The points left and, from the mean time of the points run so far, how long
+    they will take: ``"; 3 of 8 points left, about 2 min"``."""
+
+    def __init__(self, n: int):
+        self.n, self.finished, self.t0 = n, 0, time.perf_counter()
+
+    def done(self) -> str:
+        self.finished += 1
+        left = self.n - self.finished
+        if left <= 0:
+            return ""
+        per = (time.perf_counter() - self.t0) / self.finished
+        return f"; {left} of {self.n} point(s) left, about {_duration(per * left)}"
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+class _PointProgress:
+    """A point's ``progress(t, t_end)``: a line every ``EVERY`` seconds of a long
+    point (``"[2/5] mu=0.4: t = 1.2 / 3 s, 12 s"``), none for a short one."""
+
+    EVERY = 5.0
+
+    def __init__(self, say: Callable[[str], None], head: str):
+        self.say, self.head = say, head
+        self.t0 = self.last = None
+
+    def __call__(self, t: float, t_end: float):
+        now = time.perf_counter()
+        if self.t0 is None:
+            self.t0 = self.last = now
+        if now - self.last >= self.EVERY:
+            self.last = now
+            self.say(f"{self.head}: t = {t:.3g} / {t_end:g} s, {now - self.t0:.0f} s")
 
 
 def _legacy_files(out: Path) -> list[str]:
@@ -346,7 +409,7 @@ def _check_point_folders(out: Path, points, keys, study: str, resume: bool):
     or a dangling link, holds a file of a point's result name that no run of
     taichi_hsdem wrote, or holds the finished result of another study (a plain
     run's, or another sweep file's) that this sweep would run again."""
-    from ..output import owned_files
+    from ..output import foreign_files
     for point, key in zip(points, keys):
         where = out / point_folder(point)
         problem = point_folder_problem(where)
@@ -354,8 +417,7 @@ def _check_point_folders(out: Path, points, keys, study: str, resume: bool):
             raise StudyFolderError(problem)
         if not where.is_dir():
             continue
-        mine = owned_files(where)
-        foreign = [n for n in POINT_FILES if os.path.lexists(where / n) and n not in mine]
+        foreign = foreign_files(where)
         if foreign:
             raise StudyFolderError(
                 f"{where / foreign[0]}: not written by a run of taichi_hsdem, and the "
@@ -377,48 +439,43 @@ def _check_point_folders(out: Path, points, keys, study: str, resume: bool):
                 "one would replace: choose another folder, or remove that point's folder")
 
 
-def _write_point_manifest(where: Path, names):
-    """The run's manifest (:data:`taichi_hsdem.output.MANIFEST`) in a point's
-    folder, so that runs and sweeps alike know these files as theirs."""
-    from ..output import MANIFEST
-    atomic_write(where / MANIFEST, json.dumps({"files": sorted(names)}) + "\n")
-
-
 def run_point(scene: Scene, point: Mapping, common: Mapping, base: str, where: str,
-              key: str, study: str | None = None) -> tuple[str, dict | None, str | None]:
+              key: str, study: str | None = None, quick: Mapping | None = None,
+              progress: Callable[[float, float], None] | None = None
+              ) -> tuple[str, dict | None, str | None]:
     """Run one point of a sweep into folder ``where`` (here or on a cluster worker):
-    ``(status, summary as written or None, message)``."""
+    ``(status, summary as written or None, message)``.
+
+    The point is a run into its own folder, with a run's protections (the folder's
+    lock, its files staged and published together, the manifest) and a run's files
+    but the video and ParaView series: the scene, ``escapees.csv``,
+    ``arches.csv``, ``flow.csv`` (and a network's files), the final state, the
+    plots and ``summary.json`` (last: its presence marks the point finished), whose
+    ``sweep`` entry records the point's overrides, the common ones and ``quick``'s.
+    ``progress(t, t_end)`` is called after every check of the run.
+    """
     # the simulator loads Taichi (about a second): only once there is something to run
-    from ..output import FINAL_STATE, write_final_state, write_resolved_scene, write_series, \
-        write_summary
-    from ..output import owned_files
+    from ..output import FolderInUse, FolderUnusable, Pictures, Staging
     from ..runner import RunFailed, build, execute, unstable_message
     where = Path(where)
-    where.mkdir(parents=True, exist_ok=True)
-    # listed before they are written, so that a point cut short leaves no file of
-    # ours unlisted
-    _write_point_manifest(where, owned_files(where) | set(POINT_FILES))
-    # A result of other overrides left here must not pass for this point's.
-    (where / SUMMARY).unlink(missing_ok=True)
-    (where / FINAL_STATE).unlink(missing_ok=True)
     try:
         sim = build(scene)
     except RunFailed as error:
         return "invalid", None, "; ".join(error.lines)
-    write_resolved_scene(sim.scene, where, sim.model.notes)
     try:
-        result = execute(sim)
-    except RunFailed as error:
-        return "failed", None, "; ".join(error.lines)
-    summary = result.summary
-    summary["sweep"] = {"overrides": dict(point), "common": dict(common), "base_scene": base,
-                        "scene_sha256": key, "study": study}
-    statuses = [r["status"] for r in summary["realizations"]]
-    write_series(result.series, statuses, where)
-    write_final_state(result, where)
-    write_summary(summary, where)  # last: its presence marks the point finished
-    _write_point_manifest(where, {n for n in owned_files(where) | set(POINT_FILES)
-                                  if os.path.lexists(where / n)})
+        with Staging(where) as staged:
+            pictures = Pictures(sim, staged, moving=False)
+            try:
+                result = execute(sim, progress=progress)
+            except RunFailed as error:
+                return "failed", None, "; ".join(error.lines)
+            result.summary["sweep"] = {
+                "overrides": dict(point), "common": dict(common), "quick": dict(quick or {}),
+                "base_scene": base, "scene_sha256": key, "study": study}
+            pictures.finish(result)
+            staged.publish(result, pictures.files())
+    except (FolderInUse, FolderUnusable) as error:
+        return "failed", None, str(error)
     summary = json.loads((where / SUMMARY).read_text())  # as later sweeps read it
     message = unstable_message(result)
     return ("unstable" if message else "ran"), summary, message
@@ -431,8 +488,12 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
                    help="skip points whose folder holds a finished run of the same "
                         "scene by the same package code (default: --resume)")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override a scene key at every point (after [common]; "
+                        "repeatable); a key the points vary is refused")
     p.add_argument("--quick", action="store_true",
-                   help="smoke test: 1/10 of run.t_end, <= 2 realizations, into OUT/quick/")
+                   help="smoke test: <= 2 realizations a point, each to its run.t_end, "
+                        "into OUT/quick/")
     p.add_argument("--cluster", metavar="ADDRESS",
                    help="run the points on a Dask cluster: a scheduler address, or local[:N] "
                         "for N worker processes here (the cluster extra)")
@@ -453,6 +514,13 @@ def main(argv=None, prog: str = "python -m taichi_hsdem sweep") -> int:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID
+    try:
+        sets = command_line_sets(args.set, sweep.points)
+    except SweepError as exc:
+        for line in exc.problems:
+            print(line, file=sys.stderr)
+        return EXIT_INVALID
+    common = {**sweep.common, **sets}
     out = Path(args.out) if args.out else Path("runs") / Path(
         args.sweep).stem
     if args.quick:
@@ -470,9 +538,9 @@ def main(argv=None, prog: str = "python -m taichi_hsdem sweep") -> int:
 
     try:
         rows = run_sweep(sweep.scene, list(sweep.points), out, resume=args.resume,
-                         progress=say, common=sweep.common, quick=args.quick,
+                         progress=say, common=common, quick=args.quick,
                          cluster=args.cluster, study=str(Path(args.sweep).resolve()))
-    except StudyFolderError as exc:
+    except (StudyFolderError, SweepError) as exc:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID

@@ -19,15 +19,14 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ..scene import Scene, SceneError, load_scene, read_toml
-from ..scene.toml import toml_value
+from ..scene.toml import parse_override_value, toml_value
 
 #: The most points a sweep takes (grid and ``[[points]]`` together): a grid
 #: larger than this is refused, with its point count, before it is built.
 MAX_POINTS = 10_000
 #: Folder names longer than this are cut and given a hash of the overrides.
 MAX_FOLDER_NAME = 100
-#: ``quick``: this fraction of each point's ``run.t_end``, at most this many realizations.
-QUICK_T_FRACTION = 0.1
+#: ``quick``: at most this many realizations a point (each to its ``run.t_end``).
 QUICK_REALIZATIONS = 2
 _SWEEP_KEYS = ("scene", "description", "common", "grid", "points")
 
@@ -126,11 +125,40 @@ def expand_grid(grid: Mapping[str, Sequence]) -> list[dict[str, Any]]:
     return [dict(zip(keys, combo)) for combo in itertools.product(*(grid[k] for k in keys))]
 
 
+def command_line_sets(sets: Sequence[str], points: Sequence[Mapping]) -> dict[str, Any]:
+    """``--set KEY=VALUE`` strings as the overrides of every point (typed as in a
+    scene's ``--set``); a key that a point varies is refused (:class:`SweepError`,
+    one line each), since the point's own value would silently win.
+
+    Examples
+    --------
+    >>> command_line_sets(["run.t_end=0.5"], [{"particles.friction": 0.1}])
+    {'run.t_end': 0.5}
+    """
+    out: dict[str, Any] = {}
+    problems = []
+    varied = {key for point in points for key in point}
+    for text in sets:
+        key, sep, value = str(text).partition("=")
+        key = key.strip()
+        if not sep or not key:
+            problems.append(f"--set {text}: expected SECTION.KEY=VALUE")
+        elif key in varied:
+            problems.append(f"--set {key}: the sweep varies this key at its points; "
+                            "change it in the sweep file instead")
+        else:
+            out[key] = parse_override_value(value.strip())
+    if problems:
+        raise SweepError(problems)
+    return out
+
+
 def quick_overrides(scene: Scene) -> dict[str, Any]:
-    """Overrides that make a smoke-test run of ``scene``: ``QUICK_T_FRACTION`` of
-    its ``run.t_end`` and at most ``QUICK_REALIZATIONS`` realizations."""
-    return {"run.t_end": QUICK_T_FRACTION * scene.run.t_end,
-            "run.realizations": min(QUICK_REALIZATIONS, scene.run.realizations)}
+    """Overrides that make a smoke-test run of ``scene``: at most
+    ``QUICK_REALIZATIONS`` realizations, each to the scene's own ``run.t_end`` (a
+    shorter run would stop before the first clogs, and a run that clogs stops
+    there), so a quick point gives the point's statistics, only wider."""
+    return {"run.realizations": min(QUICK_REALIZATIONS, scene.run.realizations)}
 
 
 @dataclass(frozen=True)
