@@ -411,6 +411,24 @@ def _command(argv) -> int | None:
         print(f"{argv[0]} {describe(signum)}: what finished before is kept (a rerun "
               "into the same folder goes on from there)", file=sys.stderr)
         return 128 + int(signum)
+    except Exception as exc:         # MemoryError included: one line, not a traceback
+        return _failure(exc, "the study needs more memory than this machine gave; "
+                             "use fewer points, realizations or particles")
+
+
+def _failure(exc: Exception, memory_advice: str) -> int:
+    """One line and exit 1 for an exception no check caught: out of memory (with
+    ``memory_advice``), or a defect of ours (re-raised, for its traceback, when
+    TAICHI_HSDEM_DEBUG is set)."""
+    if isinstance(exc, MemoryError):
+        print(f"out of memory: {memory_advice}", file=sys.stderr)
+        return EXIT_FAILED
+    if os.environ.get("TAICHI_HSDEM_DEBUG"):
+        raise exc
+    print(f"internal error ({type(exc).__name__}: {exc}); this is a bug of "
+          "taichi_hsdem: please report it with the command (set "
+          "TAICHI_HSDEM_DEBUG=1 for the traceback)", file=sys.stderr)
+    return EXIT_FAILED
 
 
 def main(argv=None) -> int:
@@ -447,18 +465,10 @@ def _guarded(argv, interrupt) -> int:
     except KeyboardInterrupt:
         print(f"{interrupt.what} during set-up: nothing was written", file=sys.stderr)
         return interrupt.code
-    except MemoryError:
-        print("out of memory: the scene needs more memory than this machine gave; "
-              "use fewer realizations, particles, nodes or a coarser fluid.cell_size",
-              file=sys.stderr)
-        return EXIT_FAILED
     except Exception as exc:         # a defect of ours: one line, not a traceback
-        if os.environ.get("TAICHI_HSDEM_DEBUG"):
-            raise
-        print(f"internal error ({type(exc).__name__}: {exc}); this is a bug of "
-              "taichi_hsdem: please report it with the command (set "
-              "TAICHI_HSDEM_DEBUG=1 for the traceback)", file=sys.stderr)
-        return EXIT_FAILED
+        return _failure(exc, "the scene needs more memory than this machine gave; use "
+                             "fewer realizations, particles, nodes or a coarser "
+                             "fluid.cell_size")
 
 
 def _main(args, interrupt) -> int:

@@ -122,3 +122,31 @@ def test_a_limited_address_space_is_said_in_one_line(tmp_path):
     assert len(lines) == 1 and lines[0].startswith(
         "Taichi could not reserve the 1 GiB of address space it starts with"), lines
     assert "ulimit -v" in lines[0] and not out.exists()
+
+
+@pytest.mark.parametrize("command", ["sweep", "figures", "calibrate", "arches"])
+@pytest.mark.parametrize("error, start", [
+    (ValueError("boom"), "internal error (ValueError: boom); this is a bug of taichi_hsdem"),
+    (MemoryError(), "out of memory: the study needs more memory"),
+])
+def test_a_study_that_fails_inside_says_one_line_not_a_traceback(monkeypatch, capsys,
+                                                                 command, error, start):
+    """An exception no check of a study caught (a defect, or memory running out) is
+    one line and exit 1, as for a run; TAICHI_HSDEM_DEBUG=1 gives the traceback."""
+    import importlib
+
+    from taichi_hsdem.cli import COMMANDS
+    module = importlib.import_module(f"taichi_hsdem.studies.{COMMANDS[command]}")
+
+    def failing(argv, prog):
+        raise error
+    monkeypatch.setattr(module, "main", failing)
+    monkeypatch.delenv("TAICHI_HSDEM_DEBUG", raising=False)
+    assert main([command, "x.toml"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(start), err
+    assert "Traceback" not in err[0]
+    monkeypatch.setenv("TAICHI_HSDEM_DEBUG", "1")
+    if not isinstance(error, MemoryError):
+        with pytest.raises(type(error)):
+            main([command, "x.toml"])
