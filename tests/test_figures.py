@@ -322,12 +322,16 @@ def test_pmf_collapse_quick(tmp_path):
     _check_stat_outputs(out, "pmf-collapse", 3)
 
 
-@pytest.mark.slow
-def test_friction_quick(tmp_path):
+def test_friction_quick_clogs(tmp_path):
+    """The quick disk figures run long enough to clog (before: 0.5 s, every point
+    "0 clogged" and its <s> a lower bound)."""
     out = tmp_path / "fig10"
     assert figures.main(["friction", "--quick", "--out", str(out), "--quiet"]) == 0
     points = _check_stat_outputs(out, "friction", 3)
     assert [float(p["mu"]) for p in points] == [0.1, 0.5, 0.9]
+    assert all(int(p["n_clogged"]) >= 1 for p in points), points
+    assert sum(int(p["n_clogged"]) for p in points) >= 6     # of 9: 9 here, seeds fixed
+    assert all(p["mean_s"] not in ("", None) for p in points)
 
 
 @pytest.mark.slow

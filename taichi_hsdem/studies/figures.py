@@ -72,12 +72,16 @@ Sizes
 -----
 Default: :data:`DEFAULT_REALIZATIONS` realizations per point and the scene's
 ``t_end`` (5 s); the paper used 100 per point (``--realizations 100``).
-``--quick`` is a smoke test of the whole chain for CI (a couple of minutes on two
-CPU cores): few realizations, a short ``t_end``, a clog window of 0.15 s, the
-upstream channel shrunk to :data:`QUICK_BOX` bounding diameters square (the
-count-based scenes scaled to the same areal fraction) so that particles reach the
-constriction within that time, and for the level-set scenes a fluid cell of
-``d_b / 5``. Its numbers are not the paper's statistics. ``--set`` overrides
+``--quick`` is a smoke test of the whole chain: 2-3 realizations a point, a clog
+window of 0.15 s, the upstream channel shrunk to :data:`QUICK_BOX` bounding
+diameters square (the count-based scenes scaled to the same areal fraction) so
+that particles reach the constriction soon. The disk figures run to
+:data:`~.points.QUICK_T_END` (3 s, stopping at a clog): they clog as the full
+figure does, with wide intervals (``friction --quick``: 9 of 9 clogged, 18 s on
+two busy cores). The level-set figures (``shapes``, ``polygons``) run 0.3 s on a
+fluid cell of ``d_b / 5``, before their first clogs (a clogging quick polygon
+point took 2 minutes here): they check the chain, their ``<s>`` are lower
+bounds. Its numbers are not the paper's statistics. ``--set`` overrides
 (applied after the command's and ``--quick``'s own, before the point's varied
 value) change anything else.
 
@@ -85,9 +89,9 @@ Examples
 --------
 ::
 
-    python tools/figures.py escapees-time --quick
-    python tools/figures.py friction --realizations 100 --out runs/fig10
-    python tools/figures.py polygons --vertices 3 4 --set run.t_end=2
+    python -m taichi_hsdem figures escapees-time --quick
+    python -m taichi_hsdem figures friction --realizations 100 --out runs/fig10
+    python -m taichi_hsdem figures polygons --vertices 3 4 --set run.t_end=2
 """
 from __future__ import annotations
 

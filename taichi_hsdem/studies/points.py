@@ -38,17 +38,23 @@ QUICK_CLOG_WINDOW = 0.15        # s
 QUICK_CELLS_PER_DB = 5.0        # quick mode, level-set scenes: fluid cell d_b / 5
 
 
+#: quick mode, disk scenes: long enough to clog (the vani scene's first escapes
+#: come at about 0.5 s, its clogs after <s> = 8 of them at 11 a second; at 0.5 s,
+#: as before, nothing had clogged); a run that clogs stops there
+QUICK_T_END = 3.0               # s
+
+
 _REPO = Path(__file__).resolve().parents[2]
 
 
 # Per command: base scene, overrides of the command, quick realizations and t_end.
 SPEC = {
     "escapees-time": dict(scene="vani_phi026.toml", fixed=["run.stop_at_clog=false"],
-                          quick_realizations=2, quick_t_end=0.5, level_set=False),
+                          quick_realizations=2, quick_t_end=QUICK_T_END, level_set=False),
     "pmf-collapse": dict(scene="vani_phi026.toml", fixed=["run.stop_at_clog=true"],
-                         quick_realizations=3, quick_t_end=0.5, level_set=False),
+                         quick_realizations=3, quick_t_end=QUICK_T_END, level_set=False),
     "friction": dict(scene="vani_phi026.toml", fixed=["run.stop_at_clog=true"],
-                     quick_realizations=3, quick_t_end=0.5, level_set=False),
+                     quick_realizations=3, quick_t_end=QUICK_T_END, level_set=False),
     "shapes": dict(scene="squares.toml", fixed=["run.stop_at_clog=true", "particles.friction=0.4"],
                    quick_realizations=2, quick_t_end=0.3, level_set=True),
     "polygons": dict(scene="polygons.toml",
