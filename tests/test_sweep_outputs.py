@@ -12,7 +12,7 @@ import pytest
 from taichi_hsdem import output
 from taichi_hsdem.scene import load_scene
 from taichi_hsdem.studies import sweep as sweep_module
-from taichi_hsdem.studies import sweep_plot
+from taichi_hsdem.studies import progress, sweep_plot
 from taichi_hsdem.studies.sweep import SweepError, command_line_sets, point_folder, \
     quick_overrides, run_sweep
 
@@ -154,16 +154,16 @@ def test_sweep_png_draws_intervals_and_lower_bounds(tmp_path):
 
 def test_progress_says_each_long_point_s_time_and_the_points_left(monkeypatch):
     clock = iter([0.0, 10.0, 20.0])
-    monkeypatch.setattr(sweep_module.time, "perf_counter", lambda: next(clock))
-    eta = sweep_module._Eta(3)                                   # t0 = 0
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: next(clock))
+    eta = progress.Eta(3)                                   # t0 = 0
     assert eta.done() == "; 2 of 3 point(s) left, about 20 s"   # 10 s a point
     assert eta.done() == "; 1 of 3 point(s) left, about 10 s"
-    assert sweep_module._duration(600) == "10 min" and sweep_module._duration(7200) == "2.0 h"
+    assert progress.duration(600) == "10 min" and progress.duration(7200) == "2.0 h"
 
     lines = []
     times = iter([0.0, 2.0, 6.0, 7.0, 12.0])
-    monkeypatch.setattr(sweep_module.time, "perf_counter", lambda: next(times))
-    tell = sweep_module._PointProgress(lines.append, "[1/2] mu=0.2")
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: next(times))
+    tell = progress.PointProgress(lines.append, "[1/2] mu=0.2")
     for t in (0.0, 0.1, 0.2, 0.3, 0.4):
         tell(t, 3.0)
     assert lines == ["[1/2] mu=0.2: t = 0.2 / 3 s, 6 s", "[1/2] mu=0.2: t = 0.4 / 3 s, 12 s"]

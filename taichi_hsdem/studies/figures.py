@@ -114,6 +114,7 @@ from .points import (DEFAULT_POINTS, DEFAULT_REALIZATIONS, FIGURES, PAPER_REALIZ
                      QUICK_POINTS, SPEC, FigureError, PointRun, base_scene, build_points,
                      load_point, point_file, point_key, run_point, save_point, series_by_seed)
 from .cluster import Cluster, ClusterError
+from .progress import Eta
 from .folder import StudyFolder, StudyFolderError, point_folder_problem
 from .plots import pyplot, render
 from ..scene import SceneError
@@ -384,12 +385,17 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
             else:
                 todo.append(k)
 
+        eta = Eta(len(todo))
+
         def finished(i, run):
             k = todo[i]
             if not run.error:
                 save_point(kept_files[k], keys[k], run)
             runs[k] = run
             print(summary_line(command, run, _point_row(command, run)), flush=True)
+            left = eta.done()
+            if left:
+                say(left[2:])
 
         if todo:
             say(f"running {len(todo)} point(s)" + (f" on the cluster {cluster}" if cluster else ""))

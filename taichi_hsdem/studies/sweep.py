@@ -76,7 +76,6 @@ import hashlib
 import io
 import json
 import sys
-import time
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -86,6 +85,7 @@ from ..digest import code_digest
 from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
 from .cluster import Cluster
 from .folder import StudyFolder, StudyFolderError, point_folder_problem
+from .progress import Eta, PointProgress
 from .sweep_file import (MAX_POINTS, Sweep, SweepError, _check_points,  # noqa: F401
                          _describe_point, _override_strings, _value_text, expand_grid,
                          command_line_sets, load_sweep, point_folder, quick_overrides)
@@ -303,10 +303,10 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
             continue
         task = [scene, point, common, str(base), str(out / folder), key, study, quicks[k]]
         if cluster is None and progress is not None:
-            task.append(_PointProgress(say, f"[{k + 1}/{total}] {folder}"))
+            task.append(PointProgress(say, f"[{k + 1}/{total}] {folder}"))
         tasks.append(tuple(task))
         where_of.append(k)
-    clock = _Eta(len(tasks))
+    clock = Eta(len(tasks))
     if tasks:
         say(f"running {len(tasks)} point(s)" + ("" if cluster is None else
                                                 f" on the cluster {cluster}"))
@@ -334,49 +334,6 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
                       + (" (quick: <= 2 realizations a point)" if any(quicks) else "")):
         (out / SWEEP_PNG).unlink(missing_ok=True)      # no statistics: no stale plot
     return rows
-
-
-class _Eta:
-    """The points left and, from the mean time of the points run so far, how long
-    they will take: ``"; 3 of 8 points left, about 2 min"``."""
-
-    def __init__(self, n: int):
-        self.n, self.finished, self.t0 = n, 0, time.perf_counter()
-
-    def done(self) -> str:
-        self.finished += 1
-        left = self.n - self.finished
-        if left <= 0:
-            return ""
-        per = (time.perf_counter() - self.t0) / self.finished
-        return f"; {left} of {self.n} point(s) left, about {_duration(per * left)}"
-
-
-def _duration(seconds: float) -> str:
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.0f} min"
-    return f"{seconds / 3600:.1f} h"
-
-
-class _PointProgress:
-    """A point's ``progress(t, t_end)``: a line every ``EVERY`` seconds of a long
-    point (``"[2/5] mu=0.4: t = 1.2 / 3 s, 12 s"``), none for a short one."""
-
-    EVERY = 5.0
-
-    def __init__(self, say: Callable[[str], None], head: str):
-        self.say, self.head = say, head
-        self.t0 = self.last = None
-
-    def __call__(self, t: float, t_end: float):
-        now = time.perf_counter()
-        if self.t0 is None:
-            self.t0 = self.last = now
-        if now - self.last >= self.EVERY:
-            self.last = now
-            self.say(f"{self.head}: t = {t:.3g} / {t_end:g} s, {now - self.t0:.0f} s")
 
 
 def _legacy_files(out: Path) -> list[str]:
