@@ -195,3 +195,18 @@ def test_calibrate_quick_runs_to_the_scene_s_t_end_and_keeps_the_user_s(tmp_path
     calibrate.main(args + [str(tmp_path / "b"), "--set", "run.t_end=0.7"])
     assert seen["sets"] == ["run.t_end=0.7"]
     capsys.readouterr()
+
+
+def test_a_point_says_at_once_that_it_sets_up_then_its_slow_phases(monkeypatch):
+    lines = []
+    times = iter([0.0, 1.0, 7.0, 8.0, 14.0])
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: next(times))
+    tell = progress.PointProgress(lines.append, "[1/2] p")
+    tell.phase("loading Taichi")             # 0 s: at once
+    tell.phase("building the grid")          # 1 s: too soon after the last line
+    tell.phase("compiling the kernels")      # 7 s: said
+    tell(0.0, 3.0)                           # 8 s: the run starts
+    tell(0.5, 3.0)                           # 14 s: 7 s since the last line
+    assert lines == ["[1/2] p: setting up: loading Taichi",
+                     "[1/2] p: set-up: compiling the kernels",
+                     "[1/2] p: t = 0.5 / 3 s, 6 s"]

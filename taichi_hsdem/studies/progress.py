@@ -32,7 +32,8 @@ def duration(seconds: float) -> str:
 
 class PointProgress:
     """A point's ``progress(t, t_end)``: a line every ``EVERY`` seconds of a long
-    point (``"[2/5] mu=0.4: t = 1.2 / 3 s, 12 s"``), none for a short one."""
+    point (``"[2/5] mu=0.4: t = 1.2 / 3 s, 12 s"``), none for a short one; and its
+    set-up's phases (:meth:`phase`): ``"[2/5] mu=0.4: setting up: ..."`` at once."""
 
     EVERY = 5.0
 
@@ -40,10 +41,19 @@ class PointProgress:
         self.say, self.head = say, head
         self.t0 = self.last = None
 
+    def phase(self, what: str):
+        """``Simulation(on_phase=)``: the point's first line as its set-up begins,
+        then a phase only when the last line is ``EVERY`` seconds old."""
+        now = time.perf_counter()
+        if self.last is None or now - self.last >= self.EVERY:
+            self.say(f"{self.head}: {'setting up' if self.last is None else 'set-up'}: {what}")
+            self.last = now
+
     def __call__(self, t: float, t_end: float):
         now = time.perf_counter()
         if self.t0 is None:
-            self.t0 = self.last = now
+            self.t0 = now
+            self.last = now if self.last is None else self.last
         if now - self.last >= self.EVERY:
             self.last = now
             self.say(f"{self.head}: t = {t:.3g} / {t_end:g} s, {now - self.t0:.0f} s")

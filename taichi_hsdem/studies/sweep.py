@@ -416,7 +416,7 @@ def run_point(scene: Scene, point: Mapping, common: Mapping, base: str, where: s
     from ..runner import RunFailed, build, execute, unstable_message
     where = Path(where)
     try:
-        sim = build(scene)
+        sim = build(scene, on_phase=getattr(progress, "phase", None))
     except RunFailed as error:
         return "invalid", None, "; ".join(error.lines)
     try:
