@@ -176,7 +176,7 @@ def test_calibrate_quick_runs_to_the_scene_s_t_end_and_keeps_the_user_s(tmp_path
     from taichi_hsdem.studies import calibrate
     seen = {}
 
-    def fake(scene, param, realizations, sets, seed=None, pool=None):
+    def fake(scene, param, realizations, sets, seed=None, pool=None, progress=None):
         seen.update(realizations=realizations, sets=list(sets))
 
         def evaluate(value):           # <s> falls with the value: 2 / value
@@ -210,3 +210,21 @@ def test_a_point_says_at_once_that_it_sets_up_then_its_slow_phases(monkeypatch):
     assert lines == ["[1/2] p: setting up: loading Taichi",
                      "[1/2] p: set-up: compiling the kernels",
                      "[1/2] p: t = 0.5 / 3 s, 6 s"]
+
+
+def test_a_calibration_round_run_here_says_its_set_up_and_progress(monkeypatch):
+    """Before: a round ran silent (its runs got no progress; only its result line)."""
+    from taichi_hsdem.studies import calibrate
+
+    def fake(scene, progress=None):
+        assert isinstance(progress, progress_module.PointProgress)
+        progress.phase("starting Taichi (cpu)")
+        return [{"status": "ok", "escapees": 3, "clogged": True}], 0.1
+
+    progress_module = progress
+    monkeypatch.setattr(calibrate, "run_realizations", fake)
+    lines = []
+    evaluate = calibrate.simulation_evaluator(HOURGLASS, "particles.friction", 1,
+                                              progress=lines.append)
+    assert evaluate(0.3)[:2] == ([3], [True])
+    assert lines[-1] == "particles.friction = 0.3: setting up: starting Taichi (cpu)"

@@ -53,6 +53,7 @@ from .. import stats
 from ..scene import load_scene
 from ..scene.toml import toml_value
 from . import fmt
+from .progress import PointProgress
 from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
 
 __all__ = ["CalibrationError", "Evaluation", "Calibration", "calibrate", "simulation_evaluator"]
@@ -426,8 +427,9 @@ def simulation_evaluator(scene_path: str | Path, param: str, realizations: int,
                                                  f"run.seed={s0}"])
         say(f"{param} = {value:.6g}: {realizations} realization(s), seeds {s0}..."
             f"{s0 + realizations - 1}")
-        if pool is None:
-            real, wall = run_realizations(sc)
+        if pool is None or getattr(pool, "client", None) is None:     # here
+            real, wall = run_realizations(
+                sc, PointProgress(say, f"{param} = {value:.6g}") if progress else None)
         else:
             (real, wall), = pool.run(run_realizations, [(sc,)])
         ok = [r for r in real if r["status"] == "ok"]
@@ -437,13 +439,15 @@ def simulation_evaluator(scene_path: str | Path, param: str, realizations: int,
     return evaluate
 
 
-def run_realizations(scene) -> tuple[list[dict], float]:
+def run_realizations(scene, progress=None) -> tuple[list[dict], float]:
     """The realizations of ``scene`` run to the end (here or on a cluster worker),
-    and the wall time."""
+    and the wall time; ``progress``: a :class:`~.progress.PointProgress` (its set-up
+    phases and the run's time)."""
     # the simulator loads Taichi (about a second): only once there is something to run
     from ..runner import build, execute
     t0 = time.perf_counter()
-    result = execute(build(scene))
+    result = execute(build(scene, on_phase=getattr(progress, "phase", None)),
+                     progress=progress)
     return result.summary["realizations"], time.perf_counter() - t0
 
 
@@ -549,8 +553,9 @@ def main(argv=None, prog: str = "python -m taichi_hsdem calibrate") -> int:
         for value in (args.lo, args.hi):   # the parameter and both ends, checked now
             load_scene(args.scene, sets + [f"{args.param}={value!r}"])
         pool = Cluster(args.cluster)
-        evaluate = simulation_evaluator(args.scene, args.param, realizations, sets,
-                                        seed=args.seed, pool=pool)
+        evaluate = simulation_evaluator(
+            args.scene, args.param, realizations, sets, seed=args.seed, pool=pool,
+            progress=None if args.quiet else lambda m: print(m, file=sys.stderr, flush=True))
     except (SceneError, ClusterError) as exc:
         for line in getattr(exc, "problems", [str(exc)]):
             print(line, file=sys.stderr)
