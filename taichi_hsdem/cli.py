@@ -353,7 +353,7 @@ def _load(args) -> tuple:
         raise SceneError(f"--resume: {path}: the scene inside is damaged "
                          f"({exc.problems[0]})") from None
     raw.setdefault("output", {})["dir"] = str(_home_of(Path(args.resume)))
-    scene = load_scene(raw, sets)
+    scene = load_scene(raw, sets, label=str(path))
     return scene, path
 
 

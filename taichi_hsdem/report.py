@@ -38,6 +38,7 @@ the summary says so.
 """
 from __future__ import annotations
 
+import functools
 import warnings
 from pathlib import Path
 
@@ -46,6 +47,19 @@ import numpy as np
 from . import stats
 from .geometry.walls import fluid_area
 from .laws import theory_escapees
+
+
+def without_library_warnings(draw):
+    """``draw`` with the warnings raised while it plots (matplotlib's "glyph
+    missing from font", "no artists with labels", numpy's on empty data) kept off
+    the user's terminal: each is about a figure's looks, never its numbers, and
+    comes with a source line of ours the user cannot act on."""
+    @functools.wraps(draw)
+    def quiet(*args, **kwargs):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return draw(*args, **kwargs)
+    return quiet
 
 
 def _pyplot():
@@ -116,6 +130,7 @@ def draw_escapees(ax, result, law=None) -> dict:
     return {"law_from_t": t_start, "law_from_s": float(s[0])}
 
 
+@without_library_warnings
 def plot_run(result, folder: Path, law=None) -> dict:
     """Draw ``escapees.png`` (and ``pmf.png`` when the sample supports it) into
     ``folder``; ``law`` is the ``(phi, Q, H, d)`` of the steady-stream line, None
@@ -281,6 +296,7 @@ def permeability_ratio(flow, empty) -> dict:
     return {r: tuple(np.array(v).T) for r, v in per.items()}
 
 
+@without_library_warnings
 def plot_network(result, folder: Path, throats, geometry, empty) -> dict:
     """Draw ``permeability.png`` (with ``empty`` = (dp0, Q0), :func:`empty_flow`),
     ``throats_clogged.png`` and ``clog_map.png`` into ``folder`` (module notes);

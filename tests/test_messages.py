@@ -150,3 +150,97 @@ def test_a_study_that_fails_inside_says_one_line_not_a_traceback(monkeypatch, ca
     if not isinstance(error, MemoryError):
         with pytest.raises(type(error)):
             main([command, "x.toml"])
+
+
+def _hourglass_with(**changes):
+    """The hourglass scene as a dict, with top-level ``changes``."""
+    from taichi_hsdem.scene.toml import parse_toml
+    raw = parse_toml(Path(HOURGLASS).read_text())
+    raw.update(changes)
+    return raw
+
+
+@pytest.mark.parametrize("where, key", [("name", "name"),
+                                        ("species", "particles[0].name")])
+def test_a_control_character_in_a_name_is_refused(tmp_path, capsys, where, key):
+    """A scene's name becomes folder names and terminal text: an ESC in it (a
+    terminal's colour escape) is refused naming the key, nothing written."""
+    text = Path(HOURGLASS).read_text()
+    if where == "name":
+        text = text.replace('name = "hourglass24"', 'name = "hg\\u001b[31mred"')
+    else:
+        text = text.replace('name = "small"', 'name = "sm\\u001ball"')
+    scene = tmp_path / "esc.toml"
+    scene.write_text(text)
+    out = tmp_path / "o"
+    assert main([str(scene), "--out", str(out), "--set", "run.t_end=0.05", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"{scene}: {key}: holds the control "
+                                               "character U+001B"), err
+    assert "\x1b" not in err[0] and not out.exists()
+
+
+@pytest.mark.parametrize("vertices, problem", [
+    ([[0, 0], [1, 1], [1, 0], [0, 1]],
+     "edges 0 and 2 cross or touch: the polygon is self-intersecting (not simple)"),
+    ([[0, 0], [1, 0], [2, 0], [3, 0]],
+     "the polygon has zero area (its vertices lie on one line)"),
+])
+def test_a_bow_tie_polygon_is_self_intersecting_not_of_zero_area(vertices, problem):
+    """A bow tie's signed area is zero (its lobes cancel), but what is wrong is
+    that two edges cross; "zero area" stays for vertices on one line."""
+    from taichi_hsdem.scene import SceneError, load_scene
+    raw = _hourglass_with()
+    raw["particles"][0] = {**raw["particles"][0], "shape": "polygon",
+                           "vertices": vertices}
+    raw["particles"][0].pop("diameter")
+    with pytest.raises(SceneError) as info:
+        load_scene(raw)
+    assert info.value.problems == [f"<dict>: particles[0].vertices: {problem}"]
+
+
+def test_a_resumes_bad_set_is_prefixed_with_the_checkpoint_not_dict(tmp_path, capsys):
+    """A continued run's scene comes from its checkpoint: a refused --set names
+    that file, not "<dict>"."""
+    from taichi_hsdem import checkpoint
+    out = tmp_path / "o"
+    assert main([HOURGLASS, "--out", str(out), "--realizations", "1", "--set",
+                 "run.t_end=0.05", "--no-video", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["--resume", str(out), "--set", "run.t_end=-1", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"{out / checkpoint.FILE} (--set run.t_end=-1): run.t_end: must be > 0, "
+                   "got -1.0"], err
+
+
+def test_a_micromodel_pillar_too_small_to_resolve_is_said_in_its_key(tmp_path, capsys):
+    """A pillar diameter far below the channel's size made the pillars' polygons
+    collinear in float64, reported as "geometry: obstacle 0: the polygon has no
+    area"; it is said on geometry.pillar_diameter, with the limit."""
+    scene = str(ROOT / "scenes" / "micromodel.toml")
+    out = tmp_path / "o"
+    assert main([scene, "--out", str(out), "--set", "geometry.pillar_diameter=1e-12",
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "geometry.pillar_diameter: 1e-12 is too small" in err[0], err
+    assert "at least 1e-06 of it" in err[0] and "obstacle" not in err[0]
+    assert not out.exists()
+
+
+def test_plotting_keeps_library_warnings_off_the_terminal(tmp_path):
+    """matplotlib's warnings (a legend with no labelled line when every point
+    failed, a glyph missing from the font for a name in CJK) came with a source
+    line of ours on stderr; the figures are drawn without them."""
+    import warnings
+
+    from taichi_hsdem.studies import plots
+    row = {"phi": 0.1, "rate": float("nan"), "rate_stderr": float("nan"),
+           "flow_rate": 1.0, "gap": 1.0, "d_eq": 1.0, "t_first_mean": float("nan")}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plots.plot_escapees_time([], [row], tmp_path / "f.png", "meta")
+        assert main([HOURGLASS, "--out", str(tmp_path / "o"), "--realizations", "1",
+                     "--set", 'name="砂時計"', "--set", "run.t_end=0.05", "--no-video",
+                     "--quiet"]) == 0
+    assert (tmp_path / "f.png").is_file() and (tmp_path / "o" / "escapees.png").is_file()
+    assert [str(w.message) for w in caught if issubclass(w.category, UserWarning)] == []

@@ -51,6 +51,10 @@ class PillarError(ValueError):
     def __init__(self, key: str, problem: str):
         self.key, self.problem = key, problem
         super().__init__(f"{key}: {problem}")
+#: Smallest pillar diameter, relative to the channel's larger side: a pillar's
+#: outline is built from coordinates of the channel's size, and below about 3e-8
+#: of it float64 rounding makes its polygon collinear (1e-6 leaves a margin).
+MIN_RELATIVE_DIAMETER = 1e-6
 #: Tries for each pillar of a random array before the array is refused as too dense.
 RANDOM_TRIES = 2000
 
@@ -117,13 +121,19 @@ def pillar_array(array: str, rows: int, columns: int, diameter: float, spacing: 
     if gap <= 0:
         raise PillarError("pillar_spacing", f"{spacing:g} must exceed pillar_diameter "
                           f"({diameter:g}): the pillars would touch")
+    smallest = MIN_RELATIVE_DIAMETER * max(length, width)
+    if not diameter >= smallest:
+        raise PillarError("pillar_diameter", f"{diameter:g} is too small for a channel "
+                          f"{max(length, width):g} long: a pillar must be at least "
+                          f"{MIN_RELATIVE_DIAMETER:g} of it ({smallest:.3g}) for its "
+                          "outline to be resolved")
     r = diameter / 2.0
     y0 = -width / 2.0 + gap + r          # centre of the lowest pillar of a column
     if array == "random":
         centres, radii = _random(rows * columns, r, spread, inlet_length,
                                  inlet_length + columns * spacing, width,
                                  gap / 2.0 if min_throat is None else min_throat,
-                                 sides, shape, np.random.default_rng(seed))
+                                 sides, shape, np.random.default_rng(seed), smallest)
     else:
         if array == "staggered" and rows < 2:
             raise PillarError("rows", "a staggered array needs at least 2 rows (every "
@@ -185,12 +195,17 @@ def _narrowest_gap(obstacles, width: float, outer: float) -> float:
     return min([walls] + [polygon_gap(obstacles[i], obstacles[j]) for i, j in near])
 
 
-def _random(n, r, spread, x0, x1, width, min_throat, sides, shape, rng):
+def _random(n, r, spread, x0, x1, width, min_throat, sides, shape, rng, smallest):
     z = np.clip(rng.standard_normal(n), -2.0, 2.0)
     radii = r * (1.0 + spread * z)
     if radii.min() <= 0:
         raise PillarError("diameter_spread", f"{spread:g} gives pillars of no size; use "
                           "less than 0.5")
+    if 2.0 * radii.min() < smallest:
+        raise PillarError("diameter_spread", f"{spread:g} gives a pillar of diameter "
+                          f"{2.0 * radii.min():g}, below the {smallest:.3g} "
+                          f"({MIN_RELATIVE_DIAMETER:g} of the channel) its outline needs; "
+                          "use a smaller spread")
     # largest first: the big ones are the hard ones to fit
     radii = np.sort(radii)[::-1]
     outer = np.array([vertex_radius(rr, sides, shape) for rr in radii])

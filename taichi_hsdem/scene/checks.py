@@ -9,6 +9,7 @@ and fills the defaults that depend on other keys."""
 from __future__ import annotations
 
 import math
+import unicodedata
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,15 @@ def path_length_problem(path) -> str | None:
                 f"{MAX_PATH_BYTES}: no file system takes it")
     return None
 
+
+def control_character(text: str) -> str | None:
+    """The first control character in ``text`` (ESC, a newline, DEL, ...) spelt
+    as U+XXXX, or None."""
+    for c in text:
+        if unicodedata.category(c) == "Cc":
+            return f"U+{ord(c):04X}"
+    return None
+
 # ---------------------------------------------------------------- polygons
 
 def _polygon_problem(points) -> str | None:
@@ -47,8 +57,9 @@ def _polygon_problem(points) -> str | None:
     for i in range(n):
         if points[i] == points[(i + 1) % n]:
             return f"vertices {i} and {(i + 1) % n} coincide"
-    if signed_area(points) == 0.0:
-        return "the polygon has zero area"
+    zero_area = signed_area(points) == 0.0
+    if zero_area and _collinear(points):
+        return "the polygon has zero area (its vertices lie on one line)"
     for i in range(n):
         # Adjacent edges share a vertex; they only fail by folding back on each other.
         a, b, c = points[i], points[(i + 1) % n], points[(i + 2) % n]
@@ -57,8 +68,16 @@ def _polygon_problem(points) -> str | None:
             return f"the edges at vertex {(i + 1) % n} fold back on each other"
     pair = first_crossing(points)
     if pair is not None:
-        return f"edges {pair[0]} and {pair[1]} cross or touch: the polygon is not simple"
-    return None
+        return (f"edges {pair[0]} and {pair[1]} cross or touch: the polygon is "
+                f"self-intersecting (not simple)")
+    return "the polygon has zero area" if zero_area else None
+
+
+def _collinear(points) -> bool:
+    """Whether every vertex lies on the line through the first and the farthest."""
+    p = np.asarray(points, dtype=float) - np.asarray(points[0], dtype=float)
+    far = p[int(np.argmax(np.hypot(p[:, 0], p[:, 1])))]
+    return bool(np.all(far[0] * p[:, 1] - far[1] * p[:, 0] == 0.0))
 
 
 # --------------------------------------------------------------- cross-key checks
@@ -244,6 +263,10 @@ def _check_scene(scene: dict, species: dict[int, dict], shapes: dict[int, Any],
                         or any(c in name for c in "/\\\0")):
         out.add("name", f"must be a non-empty folder name without / or \\, got "
                         f"{show(name)}")
+    elif good(name) and control_character(name) is not None:
+        out.add("name", f"holds the control character {control_character(name)}; it "
+                        f"names the output folder and is printed, give printable text, "
+                        f"got {show(name)}")
     elif good(name) and len(name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
         out.add("name", f"is {len(name.encode('utf-8', 'surrogatepass'))} bytes long; it "
                         f"names the default output folder runs/<name>, and a file system "
@@ -287,6 +310,10 @@ def _check_scene(scene: dict, species: dict[int, dict], shapes: dict[int, Any],
                              f"it must be < {MAX_PACKING_FRACTION}")
     seen: dict[str, int] = {}
     for k, s in species.items():
+        if good(s["name"]) and control_character(s["name"]) is not None:
+            out.add(f"particles[{k}].name", f"holds the control character "
+                    f"{control_character(s['name'])}; give printable text, got "
+                    f"{show(s['name'])}")
         if good(s["name"]):
             if s["name"] in seen:
                 out.add(f"particles[{k}].name", f"{show(s['name'])} already names "

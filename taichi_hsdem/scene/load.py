@@ -340,7 +340,7 @@ def _assign(table: dict, key: str, value: Any) -> None:
 
 
 def load_scene(source: str | Path | Mapping[str, Any],
-               overrides: Iterable[str] = ()) -> Scene:
+               overrides: Iterable[str] = (), label: str | None = None) -> Scene:
     """Read, override and validate a scene.
 
     Parameters
@@ -351,6 +351,9 @@ def load_scene(source: str | Path | Mapping[str, Any],
         ``"section.key=value"`` strings; ``value`` is read as a TOML value, or as a
         plain string when it is not one. ``particles.K.key=v`` sets species ``K``,
         ``particles.key=v`` every species.
+    label : str, optional
+        Where a dict came from (a checkpoint's path, say), the prefix of its
+        problems and the scene's ``source``; ``"<dict>"`` when not given.
 
     Returns
     -------
@@ -366,7 +369,7 @@ def load_scene(source: str | Path | Mapping[str, Any],
     >>> load_scene("scenes/hourglass.toml", ["run.t_end=0.5"])  # doctest: +SKIP
     """
     if isinstance(source, Mapping):
-        raw, label, stem = copy.deepcopy(dict(source)), "<dict>", "scene"
+        raw, label, stem = copy.deepcopy(dict(source)), label or "<dict>", "scene"
     elif isinstance(source, (str, Path)):
         path = Path(source)
         raw, label, stem = read_toml(path), str(path), path.stem

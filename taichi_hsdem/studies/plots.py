@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from .. import stats
+from ..report import without_library_warnings
 from ..laws import theory_escapees
 from .points import series_by_seed
 
@@ -74,6 +75,7 @@ def _finish(plt, fig, path, meta):
     plt.close(fig)
 
 
+@without_library_warnings
 def plot_escapees_time(runs, rows, path: Path, meta: str):
     plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.4))
@@ -128,6 +130,7 @@ def plot_escapees_time(runs, rows, path: Path, meta: str):
     _finish(plt, fig, path, meta)
 
 
+@without_library_warnings
 def plot_pmf_collapse(runs, rows, pmfs, path: Path, meta: str):
     plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.4))
@@ -187,6 +190,7 @@ def _mean_decay_panels(a1, a2, x, rows, xlabel, labels=None, xticks=None, series
             a.set_xticklabels(labels)
 
 
+@without_library_warnings
 def plot_friction(runs, rows, path: Path, meta: str):
     plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.4))
@@ -196,6 +200,7 @@ def plot_friction(runs, rows, path: Path, meta: str):
     _finish(plt, fig, path, meta)
 
 
+@without_library_warnings
 def plot_shapes(runs, rows, pmfs, path: Path, meta: str):
     plt = pyplot()
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(14, 4.4))
@@ -217,6 +222,7 @@ def plot_shapes(runs, rows, pmfs, path: Path, meta: str):
     _finish(plt, fig, path, meta)
 
 
+@without_library_warnings
 def plot_polygons(runs, rows, pmfs, path: Path, meta: str):
     plt = pyplot()
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(14, 4.4))
