@@ -244,3 +244,25 @@ def test_plotting_keeps_library_warnings_off_the_terminal(tmp_path):
                      "--quiet"]) == 0
     assert (tmp_path / "f.png").is_file() and (tmp_path / "o" / "escapees.png").is_file()
     assert [str(w.message) for w in caught if issubclass(w.category, UserWarning)] == []
+
+
+@pytest.mark.parametrize("size", [1e300, 1e-300])
+def test_a_polygon_of_coordinates_past_the_magnitudes_is_said_so(size):
+    """Vertices of 1e300 overflowed numpy (RuntimeWarnings with source lines on the
+    terminal) and came out as "fluid.gap: must be > (2/3) d_eq = inf"; 1e-300 as
+    "zero area": both are said as the coordinates' size, as for a number."""
+    import warnings
+
+    from taichi_hsdem.scene import SceneError, load_scene
+    raw = _hourglass_with()
+    raw["particles"][0] = {**raw["particles"][0], "shape": "polygon",
+                           "vertices": [[0.0, 0.0], [size, 0.0], [0.0, size]]}
+    raw["particles"][0].pop("diameter")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(SceneError) as info:
+            load_scene(raw)
+    assert len(info.value.problems) == 1, info.value.problems
+    assert info.value.problems[0].startswith(
+        f"<dict>: particles[0].vertices: its coordinates (up to {size:.3g} in size")
+    assert "outside the magnitudes the simulator computes with" in info.value.problems[0]

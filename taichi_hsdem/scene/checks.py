@@ -20,8 +20,8 @@ from ..geometry.polygon import (cross, first_crossing, points_in_polygon, segmen
                                 signed_area)
 from ..limits import MAX_OBSTACLE_VERTICES, MAX_OUTLINE_VERTICES
 from .coerce import BAD, Problems, good, show
-from .keys import (AUTO, MAX_PACKING_FRACTION, MIN_GAP_OVER_DEQ, SpeciesConfig, key_specs,
-                   shape_area, shape_vertex_count, vtk_indices)
+from .keys import (AUTO, MAX_MAGNITUDE, MAX_PACKING_FRACTION, MIN_GAP_OVER_DEQ, MIN_MAGNITUDE,
+                   SpeciesConfig, key_specs, shape_area, shape_vertex_count, vtk_indices)
 
 # What Linux file systems take: bytes per file or folder name, and per path.
 MAX_NAME_BYTES = 255
@@ -51,6 +51,12 @@ def control_character(text: str) -> str | None:
 def _polygon_problem(points) -> str | None:
     """Why ``points`` is not a simple polygon of non-zero area, or None."""
     n = len(points)
+    size = max(abs(c) for p in points for c in p)
+    span = max(max(p[k] for p in points) - min(p[k] for p in points) for k in (0, 1))
+    if size > MAX_MAGNITUDE or 0 < span < MIN_MAGNITUDE:
+        return (f"its coordinates (up to {size:.3g} in size, {span:.3g} across) are outside "
+                f"the magnitudes the simulator computes with ({MIN_MAGNITUDE:g} to "
+                f"{MAX_MAGNITUDE:g}); use SI units, or dimensionless numbers of ordinary size")
     if points[0] == points[-1]:
         return ("the last vertex repeats the first; the polygon closes itself, leave "
                 "the repeat out")
