@@ -8,7 +8,10 @@ polygons (self-intersecting, zero-area, collinear, too many vertices) for
 particles, outlines and obstacles; ``--resume`` on corrupted or foreign
 checkpoints (copies of one real checkpoint, made once); paths with odd
 characters (spaces, unicode, newlines, very long, dangling links, link loops);
-and argument garbage.
+and argument garbage; and the study commands (``StudyCases``: sweep files
+broken in random ways, ``figures``, ``calibrate`` and ``arches`` with bad
+arguments, folders and figure files, and signals sent to short studies run as
+processes).
 
 A case passes when ``main`` returns 0, 1, 2, 130, 143 or 129, writes a message on stderr
 when not 0, shows no traceback or "internal error", lets no exception escape,
@@ -18,7 +21,10 @@ and leaves no complete-looking result (``summary.json`` with status
 case is resolved (every check before the run) but not run. Interrupt cases
 (SIGINT, SIGTERM or SIGHUP after a random delay) always run, up to a few thousand
 steps; each must exit 128 + the signal's number with one line and leave no lock
-or staging folder.
+or staging folder. Each case runs in a fresh working folder of its own, which it
+must leave empty (but for ``runs/`` of a run or study that succeeded or was stopped
+there); a refused case (exit 2) writes nothing anywhere, and a study's case
+says at most ``MAX_LINES`` lines.
 
     nice -n 10 python tools/fuzz_cli.py --cases 2000 --seed 0
 
@@ -34,13 +40,16 @@ import json
 import math
 import os
 import random
+import re
 import shutil
 import signal
+import subprocess
 import sys
 import tempfile
 import threading
 import time
 import traceback
+import warnings
 from collections import Counter
 from pathlib import Path
 
@@ -53,11 +62,16 @@ from taichi_hsdem import checkpoint, output, runner  # noqa: E402
 from taichi_hsdem.cli import main  # noqa: E402
 from taichi_hsdem.scene.keys import SECTIONS, SpeciesConfig, key_specs  # noqa: E402
 
+
 SCENES = ROOT / "scenes"
 BASES = ["hourglass24", "vani_phi026", "squares", "polygons", "concave"]
 STEPS = 30            # DEM steps a valid run is cut to
 STOPS = (130, 143, 129)     # 128 + SIGINT's, SIGTERM's, SIGHUP's number
 EXITS = (0, 1, 2, *STOPS)
+STUDIES = ("sweep", "figures", "calibrate", "arches", "study_signal")
+QUIET_WARNINGS = (DeprecationWarning, PendingDeprecationWarning, ImportWarning,
+                  ResourceWarning)
+MAX_LINES = 12        # a study's refusal: a line per problem, a few problems
 # Keys whose large valid values only make a run long, not wrong: kept small.
 SIZE = {"run.realizations": 3, "particles.count": 30, "particles.nodes": 60,
         "output.frames": 4, "output.fps": 30, "output.width": 128, "particles.n_vertices": 8}
@@ -70,12 +84,328 @@ WRONG = ['"auto"', '"text"', "true", "[1.0, 2.0]", "[[0.0, 0.0]]", '"nan"', "{a 
          '"\\u0000"', "[[[[1]]]]", "1979-05-27", '"' + "x" * 5000 + '"', "[]", "'''a\nb'''"]
 
 
+# ------------------------------------------------------------ the study commands
+# Their cases: sweep files malformed in random ways (bad TOML, unknown keys, bad
+# grids, bad point values, grids past the point limit, --out a file or a dangling
+# link), figures, calibrate and arches with bad arguments, folders and figure
+# files, short valid studies, and SIGINT, SIGTERM or SIGHUP sent at a random moment
+# to a short study run as its own process (python -m taichi_hsdem, whose entry
+# point installs the handlers a study relies on).
+HOURGLASS = (SCENES / "hourglass24.toml").as_posix()
+# A valid sweep of two short points (each a fraction of a second of DEM).
+SWEEP = (f'scene = "{HOURGLASS}"\n[common]\n"run.t_end" = 0.05\n"run.realizations" = 1\n'
+         '[grid]\n"particles.friction" = [0.2, 0.4]\n')
+FIGURES = ["escapees-time", "pmf-collapse", "friction", "shapes", "polygons"]
+BAD_NUMBERS = ["0", "-1", "nan", "inf", "-inf", "1e300", "x", "", "1e-300", "99999999999"]
+
+
+class StudyCases:
+    """Case builders for the study commands (needs ``rng``, ``path``, ``out``,
+    ``self.ck``: the folders of two finished runs)."""
+
+    def sweep_text(self) -> str:
+        """A sweep file, valid or broken in one of many ways."""
+        r = self.rng
+        text = SWEEP
+        kind = r.choice(["valid", "cut", "flip", "dup_key", "control", "binary", "empty",
+                         "unknown_top", "unknown_key", "grid_scalar", "grid_empty",
+                         "grid_mixed", "grid_nested", "point_value", "point_key", "huge_grid",
+                         "big_grid", "no_scene", "scene_missing", "scene_dir", "scene_self",
+                         "scene_relative", "points_empty", "points_table", "grid_and_point",
+                         "folder_name", "common_bad", "deep"])
+        if kind == "cut":
+            text = text[:r.randrange(len(text))]
+        elif kind == "flip":
+            data = bytearray(text.encode())
+            for _ in range(r.randint(1, 4)):
+                data[r.randrange(len(data))] = r.randrange(256)
+            text = data.decode("utf-8", "replace")
+        elif kind == "dup_key":
+            text += '"particles.friction" = [0.3]\n'
+        elif kind == "control":
+            i = r.randrange(len(text))
+            text = text[:i] + chr(r.choice([0, 1, 8, 27, 127])) + text[i:]
+        elif kind == "binary":
+            text = "".join(chr(r.randrange(1, 256)) for _ in range(500))
+        elif kind == "empty":
+            text = r.choice(["", "\n", "[grid]\n", "scene = 1\n"])
+        elif kind == "unknown_top":
+            text = "sceen = 'x'\n" + text
+        elif kind == "unknown_key":
+            text += f'"{r.choice(["particles.frction", "nosuch.key", "run", "particles.9.count", "x"])}" = [1, 2]\n'
+        elif kind == "grid_scalar":
+            text = text.replace("[0.2, 0.4]", r.choice(["0.2", '"0.2"', "{a = 1}", "true"]))
+        elif kind == "grid_empty":
+            text = text.replace("[0.2, 0.4]", "[]")
+        elif kind == "grid_mixed":
+            text = text.replace("[0.2, 0.4]", r.choice(['[0.2, "x"]', "[0.2, [0.4]]",
+                                                        "[0.2, nan]", "[0.2, 0.2]"]))
+        elif kind == "grid_nested":
+            text = text.replace('[grid]\n"particles.friction" = [0.2, 0.4]',
+                                "[grid.particles]\nfriction = [0.2, 0.4]\n[grid.run]\n"
+                                "seed = [1, 2]")
+        elif kind == "point_value":
+            value = r.choice(["-1", "1e300", "nan", "inf", '"x"', "true", "[1]", "1e-300",
+                              "0", "100"])
+            key = r.choice(["particles.friction", "run.t_end", "particles.count",
+                            "run.realizations", "fluid.gap", "run.dt"])
+            text += f'[[points]]\n"{key}" = {value}\n'
+        elif kind == "point_key":
+            text += f'[[points]]\n"{r.choice(["run.arch", "name", "output.dir", "x.y"])}" = "a/b"\n'
+        elif kind == "huge_grid":
+            n = r.choice([11, 20, 30, 1000])
+            keys = ["particles.friction", "particles.restitution", "run.seed", "damping.xi",
+                    "particles.density", "fluid.p_in", "contact.overlap_target",
+                    "particles.diameter", "clog.window", "output.series_interval"]
+            text = text.replace('[grid]\n"particles.friction" = [0.2, 0.4]', "[grid]\n" + "".join(
+                f'"{k}" = [{", ".join(str(0.1 + i / (10 * n)) for i in range(n))}]\n'
+                for k in keys[:r.choice([3, 4, 10])]))
+        elif kind == "big_grid":          # under the point limit, validated point by point
+            text = text.replace("[0.2, 0.4]", "[" + ", ".join(
+                str(0.1 + i / 1000) for i in range(r.choice([40, 200]))) + "]")
+        elif kind == "no_scene":
+            text = text.replace(f'scene = "{HOURGLASS}"\n', "")
+        elif kind == "scene_missing":
+            text = text.replace(HOURGLASS, "nowhere/none.toml")
+        elif kind == "scene_dir":
+            text = text.replace(HOURGLASS, SCENES.as_posix())
+        elif kind == "scene_self":
+            text = text.replace(HOURGLASS, "sweep.toml")
+        elif kind == "scene_relative":
+            text = text.replace(HOURGLASS, "../" * 40 + HOURGLASS.lstrip("/"))
+        elif kind == "points_empty":
+            text = text.replace('[grid]\n"particles.friction" = [0.2, 0.4]\n', "[[points]]\n")
+        elif kind == "points_table":
+            text += '[points]\n"particles.friction" = 0.3\n'
+        elif kind == "grid_and_point":
+            text += '[[points]]\n"particles.friction" = 0.9\n"run.seed" = 3\n'
+        elif kind == "folder_name":
+            text = text.replace("[0.2, 0.4]", r.choice(['["a/b", "c"]', '["..", "."]',
+                                                        '["' + "n" * 300 + '"]']))
+            text = text.replace('"particles.friction"', '"name"')
+        elif kind == "common_bad":
+            text = text.replace('"run.t_end" = 0.05', r.choice(['"run.t_end" = -1',
+                                                                '"run.t_end" = "x"',
+                                                                '"run.t_end" = [1]',
+                                                                '"run.dt" = 1e300']))
+        elif kind == "deep":
+            text += "[grid.a.b.c.d.e.f.g.h.i.j.k.l.m.n.o.p.q.r.s.t.u.v.w.x.y.z]\nq = [1]\n"
+        return text
+
+    def case_sweep(self):
+        r = self.rng
+        path = self.path("sweep.toml")
+        path.write_text(self.sweep_text())
+        args = ["sweep", str(path)]
+        out = self.path("out")
+        how = r.choice(["plain", "plain", "plain", "file", "dangling", "under_file", "empty",
+                        "default", "point_file"])
+        if how == "file":
+            out.write_text("mine")
+        elif how == "dangling":
+            out.symlink_to(out.parent / "nowhere")
+        elif how == "under_file":
+            out.write_text("mine")
+            out = out / "sub"
+        elif how == "point_file":                 # a file where a point's folder goes
+            out.mkdir()
+            (out / "particles.friction=0.2").write_text("mine")
+        if how == "empty":
+            args += ["--out", ""]
+        elif how != "default":
+            args += ["--out", str(out)]
+        args += ["--quiet"] if r.random() < 0.9 else []
+        for _ in range(r.choice([0, 0, 1, 2])):
+            args += r.choice([["--set", "particles.friction=0.3"], ["--set", "run.t_end=-1"],
+                              ["--set", "run.seed=2"], ["--set", "nosuch=1"], ["--set", "="],
+                              ["--quick"], ["--no-resume"], ["--cluster", "nowhere:1"],
+                              ["--cluster", "local:0"], ["--bogus"], ["--set"]])
+        return args
+
+    def case_figures(self):
+        r = self.rng
+        figure = r.choice(FIGURES + ["nosuch", "", "--help"] if r.random() < 0.2 else FIGURES)
+        args = ["figures", figure, "--out", str(self.path("out"))]
+        args += ["--quiet"] if r.random() < 0.9 else []
+        for _ in range(r.randint(1, 3)):
+            option = r.choice(["--realizations", "--seed", "--batch", "--phi", "--mu",
+                               "--scene", "--set", "--cluster", "--out", "--bogus"])
+            if option == "--scene":
+                args += [option, r.choice([str(self.path("none.toml")), str(SCENES),
+                                           self.broken_scene(), "",
+                                           str(SCENES / "micromodel.toml")])]
+            elif option == "--set":
+                args += [option, r.choice(["run.t_end=-1", "particles.friction=x", "a=1",
+                                           "fluid.gap=1e-300", "run.t_end=0.01"])]
+            elif option == "--cluster":
+                args += [option, r.choice(["local:0", "local:x", "", "tcp://"])]
+            elif option == "--mu":
+                args += [option, *r.sample(BAD_NUMBERS + ["0.2", "0.5"], r.randint(1, 3))]
+            elif option == "--out":
+                link = self.path("link")
+                link.symlink_to(link.parent / "nowhere")
+                args += [option, r.choice([str(link), "/dev/null", "/proc/1/x", ""])]
+            elif option == "--bogus":
+                args += [option]
+            else:
+                args += [option, r.choice(BAD_NUMBERS)]
+        return args
+
+    def broken_scene(self) -> str:
+        p = self.path("broken.toml")
+        p.write_text(self.rng.choice(["", "[run]\nt_end = -1\n", "x = ", "[[geometry]]\n"]))
+        return str(p)
+
+    def case_calibrate(self):
+        r = self.rng
+        good = {"--target": "5", "--lo": "0.1", "--hi": "0.9"}
+        values = {"--target": BAD_NUMBERS, "--lo": BAD_NUMBERS + ["0.9"],
+                  "--hi": BAD_NUMBERS + ["0.1"], "--rounds": BAD_NUMBERS + ["1", "2"],
+                  "--realizations": BAD_NUMBERS, "--xtol": BAD_NUMBERS,
+                  "--confidence": BAD_NUMBERS + ["1", "0.5"], "--seed": BAD_NUMBERS,
+                  "--param": ["nosuch.key", "particles.name", "run.t_end", "output.video",
+                              "particles.9.friction", "", "run.arch", "fluid.gap"]}
+        for option in r.sample(sorted(values), r.randint(1, 2)):
+            good[option] = r.choice(values[option])
+        scene = r.choice([HOURGLASS] * 4 + [str(self.path("none.toml")), self.broken_scene(),
+                                            str(SCENES)])
+        args = ["calibrate", scene, "--out", str(self.path("out")),
+                *sum(([k, v] for k, v in good.items() if r.random() < 0.95), [])]
+        args += ["--quiet"] if r.random() < 0.9 else []
+        if r.random() < 0.3:
+            args += r.choice([["--quick"], ["--set", "run.t_end=-1"], ["--cluster", "local:0"],
+                              ["--out", "/dev/null"], ["--bogus"]])
+        return args
+
+    def case_arches(self):
+        r = self.rng
+        folder = self.path("fig")
+        kind = r.choice(["missing", "file", "empty", "run", "run_options", "run_damaged",
+                         "json_bad", "json_list", "json_no_scene", "json_scene_missing",
+                         "json_points", "point_file", "point_rows", "point_finals",
+                         "bad_options", "link"])
+        args = ["arches", str(folder)]
+        if kind == "file":
+            folder.write_text("mine")
+        elif kind == "link":
+            folder.symlink_to(folder.parent / "nowhere")
+        elif kind == "empty":
+            folder.mkdir()
+        elif kind.startswith("run"):
+            shutil.copytree(self.ck["one"], folder)
+            if kind == "run_options":
+                args += [r.choice(["--tol", "--angle", "--examples"]), "1"]
+            elif kind == "run_damaged":
+                name = r.choice(["summary.json", "arches.csv"])
+                how = r.choice(["empty", "garbage", "dir", "list"])
+                (folder / name).unlink()
+                if how == "dir":
+                    (folder / name).mkdir()
+                else:
+                    (folder / name).write_text({"empty": "", "garbage": "\x00{[,",
+                                                "list": "[1, 2]"}[how])
+        elif kind != "missing":
+            folder.mkdir()
+            fig = {"figure": "friction", "scene": HOURGLASS, "base_overrides": [],
+                   "points": [{"label": "mu=0.2", "values": {"mu": 0.2},
+                               "overrides": {"particles.friction": 0.2}}]}
+            point = {"key": "k", "label": "mu=0.2", "rows": [
+                {"seed": 1, "escapees": 3, "clogged": True, "status": "ok"}],
+                "finals": {"1": {"x": [[1.0, 2.0]], "theta": [0.0], "alive": [1],
+                                 "species": [0]}}}
+            if kind == "json_bad":
+                text = r.choice(["", "{", "\x00", "null", '"x"'])
+            elif kind == "json_list":
+                text = json.dumps([fig])
+            else:
+                if kind == "json_no_scene":
+                    del fig["scene"]
+                elif kind == "json_scene_missing":
+                    fig["scene"] = str(folder / "none.toml")
+                elif kind == "json_points":
+                    fig["points"] = r.choice([None, 3, [3], [{}], [{"label": "a"}], "x"])
+                elif kind == "point_rows":
+                    point["rows"] = r.choice([None, [3], [{}], [{"status": "ok"}],
+                                              [{"status": "ok", "clogged": True}]])
+                elif kind == "point_finals":
+                    point["finals"] = r.choice([{"1": {}}, {"1": 3}, [1],
+                                                {"1": {"x": [], "theta": [], "alive": [],
+                                                       "species": []}},
+                                                {"1": {"x": [[1e300, "x"]], "theta": [0.0],
+                                                       "alive": [1], "species": [9]}}])
+                text = json.dumps(fig)
+                if kind != "json_scene_missing" and kind != "point_file":
+                    (folder / "points").mkdir()
+                    (folder / "points" / "mu=0.2.json").write_text(json.dumps(point))
+                elif kind == "point_file":
+                    (folder / "points").mkdir()
+                    (folder / "points" / "mu=0.2.json").write_text(r.choice(["", "{", "[]"]))
+            (folder / "figure.json").write_text(text)
+            if kind == "bad_options":
+                args += [r.choice(["--tol", "--angle", "--examples"]),
+                         r.choice(BAD_NUMBERS + ["90", "1", "0.5"])]
+        return args
+
+    def case_study_signal(self):
+        """A short study run as its own process, given SIGINT, SIGTERM or SIGHUP
+        after a random delay: during the import, the sweep file's checks, a point's
+        run, the writing of the results, or after the study ended."""
+        r = self.rng
+        self.subprocess = True
+        self.signal = r.choice([signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+        self.sigint_after = r.uniform(0.0, 6.0)
+        kind = r.choice(["sweep", "sweep", "sweep", "arches", "calibrate"])
+        if kind == "sweep":
+            path = self.path("sweep.toml")
+            path.write_text(SWEEP)
+            return ["sweep", str(path), "--out", str(self.path("out")), "--quiet"]
+        if kind == "arches":
+            folder = self.path("run")
+            shutil.copytree(self.ck["one"], folder)
+            return ["arches", str(folder)]
+        return ["calibrate", HOURGLASS, "--target", "3", "--lo", "0.2", "--hi", "0.6",
+                "--realizations", "1", "--rounds", "2", "--set", "run.t_end=0.2",
+                "--out", str(self.path("out")), "--quiet"]
+
+
+# Failures found by this fuzzer whose fix lies in code being changed elsewhere:
+# counted and shown apart ("known"), not as failures. Remove an entry once fixed.
+KNOWN = {
+    "arches: a damaged point file of a figure folder (rows or finals lacking keys or "
+    "of the wrong type) raises from studies/arches.py instead of one line":
+        lambda f: f["family"] == "arches" and "studies/arches.py" in f["problem"],
+    "sweep/figures/calibrate: a bad or unreachable --cluster is refused only after the "
+    "study folder and its manifest (calibrate: and calibration.csv) were made":
+        lambda f: (f["family"] in ("sweep", "figures", "calibrate") and f["code"] == 2
+                   and f["problem"].startswith("refused (exit 2) but wrote")
+                   and "--cluster" in f["stderr"]),
+    "calibrate: a scene refused at the first round's set-up (exit 2) leaves the "
+    "folder, its manifest and calibration.csv":
+        lambda f: (f["family"] == "calibrate" and f["code"] == 2
+                   and f["problem"].startswith("refused (exit 2) but wrote")
+                   and "calibration stopped" in f["stderr"]),
+    "sweep: a bad value in a [grid] list is said once for every point holding it (a "
+    "line each: 8000 lines for a 20 x 20 x 20 grid) rather than once":
+        lambda f: (f["family"] == "sweep" and f["problem"].endswith("lines on stderr")
+                   and ": point " in f["stderr"]),
+    "figures --quiet: every point refused at set-up (--realizations 99999999999) exits 1 "
+    "with nothing on stderr (the points' FAILED lines are progress, silenced)":
+        lambda f: (f["family"] == "figures" and f["code"] == 1 and "--quiet" in f["args"]
+                   and f["problem"] == "exit 1 without a message"),
+}
+
+
+def known(failure: dict) -> str | None:
+    """The KNOWN entry ``failure`` is an instance of, or None."""
+    return next((name for name, match in KNOWN.items() if match(failure)), None)
+
+
 class _Skip(BaseException):
     """A valid case past the cap of real runs: resolved, not run (not an exception
     the command line catches, so it comes back to the fuzzer)."""
 
 
-class Fuzzer:
+class Fuzzer(StudyCases):
     def __init__(self, work: Path, seed: int, valid_runs: int):
         self.work, self.rng, self.valid_runs = work, random.Random(seed), valid_runs
         self.runs = 0
@@ -87,13 +417,25 @@ class Fuzzer:
         self.n = 0
         self.sigint_after = None     # seconds to Ctrl-C in the current case, or None
         self.signal = signal.SIGINT  # and which signal
+        self.subprocess = False      # the case runs as its own process
+        self.folder = self.work      # the current case's folder
+        self.names = Counter()
 
     # ------------------------------------------------------------------ plumbing
-    def path(self, name: str) -> Path:
+    def begin(self) -> Path:
+        """A fresh folder for the next case, and in it the empty working folder
+        ``cwd`` the case runs in; returns that."""
         self.n += 1
-        folder = self.work / f"c{self.n}"
-        folder.mkdir()
-        return folder / name
+        self.folder = self.work / f"c{self.n}"
+        self.folder.mkdir()
+        self.names.clear()
+        (self.folder / "cwd").mkdir()
+        return self.folder / "cwd"
+
+    def path(self, name: str) -> Path:
+        """A path of the current case's folder, not taken yet (``name``, ``2-name``, ...)."""
+        self.names[name] += 1
+        return self.folder / (name if self.names[name] == 1 else f"{self.names[name]}-{name}")
 
     def out(self) -> str:
         return str(self.path("out"))
@@ -430,9 +772,10 @@ class Fuzzer:
     def case(self):
         self.sigint_after = None
         self.signal = signal.SIGINT
+        self.subprocess = False
         family = self.rng.choices(
             ["overrides", "combination", "toml", "polygon", "resume", "paths", "argv",
-             "interrupt"], weights=[35, 8, 15, 12, 15, 10, 5, 4])[0]
+             "interrupt", *STUDIES], weights=[35, 8, 15, 12, 15, 10, 5, 4, 12, 5, 5, 6, 2])[0]
         return family, getattr(self, f"case_{family}")()
 
     def guarded_build(self, build):
@@ -501,91 +844,184 @@ def _out_of(args: list[str], work: Path) -> Path | None:
     return None
 
 
+def _tree(folder: Path) -> set[str]:
+    """Every path under ``folder`` (links not followed), relative to it."""
+    found = set()
+    for top, dirs, files in os.walk(folder):
+        found.update(os.path.relpath(os.path.join(top, n), folder) for n in dirs + files)
+    return found
+
+
+def _study_leftovers(out: Path | None) -> list[str]:
+    """Locks and staging folders a stopped study left in ``out`` or its points'
+    folders."""
+    if out is None or not out.is_dir():
+        return []
+    return sorted(p for p in _tree(out)
+                  if Path(p).name.startswith((output.STAGING_PREFIX, output.LOCK)))
+
+
+def _in_process(fuzz: Fuzzer, args: list[str]) -> tuple:
+    """``main(args)`` here, stderr captured: (exit status, stderr, traceback or None)."""
+    err, std = io.StringIO(), io.StringIO()
+    problem = None
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(std), \
+            _signal_after(fuzz.sigint_after, fuzz.signal), \
+            warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for category in QUIET_WARNINGS:    # what Python shows no user by default
+            warnings.simplefilter("ignore", category)
+        try:
+            code = main(list(args))
+        except _Skip:
+            code = "valid, not run"
+        except BaseException:    # noqa: BLE001 - any escape is the finding
+            code = "exception"
+            problem = traceback.format_exc()
+    text = err.getvalue() + "".join(
+        warnings.formatwarning(w.message, w.category, w.filename, w.lineno) for w in caught)
+    return code, text, problem
+
+
+def _as_process(fuzz: Fuzzer, args: list[str], cwd: Path) -> tuple:
+    """``python -m taichi_hsdem ARGS`` as a process in ``cwd``, sent ``fuzz.signal``
+    after ``fuzz.sigint_after`` seconds unless it ended first."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "taichi_hsdem", *args], cwd=cwd, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        proc.wait(timeout=fuzz.sigint_after)
+        fuzz.sigint_after = None                 # it ended first: no signal sent
+    except subprocess.TimeoutExpired:
+        proc.send_signal(fuzz.signal)
+    try:
+        text = proc.communicate(timeout=600)[1]
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return "hung", proc.communicate()[1], "no exit within 600 s"
+    code = proc.returncode
+    if code < 0:
+        return code, text, f"killed by {signal.Signals(-code).name} (no handler)"
+    return code, text, None
+
+
+def _check(fuzz, family, args, code, text, out, before, tree, cwd, case) -> str | None:
+    """Why the case failed, or None."""
+    if code not in EXITS and code != "valid, not run":
+        return f"exit {code!r}"
+    if code not in (0, "valid, not run") and not text.strip():
+        return f"exit {code} without a message"
+    if "Traceback" in text or "internal error" in text:
+        return "traceback or internal error on stderr"
+    warned = re.search(r"^\S+:\d+: (\w+Warning): .*", text, re.M)
+    if warned:
+        return f"a {warned[1]} with its source line on stderr: {warned[0][:200]}"
+    lines = text.strip().splitlines()
+    if family in STUDIES and code != 0 and len(lines) > MAX_LINES:
+        return f"{len(lines)} lines on stderr"
+    left = sorted(os.listdir(cwd))
+    if left and not (left == ["runs"] and code in (0, "valid, not run", *STOPS)):
+        return f"left {left} in the working folder"
+    if code == 2 and _tree(case) - tree:
+        return f"refused (exit 2) but wrote {sorted(_tree(case) - tree)[:5]}"
+    # A stopped run exits 128 + its signal's number with one line and leaves no lock
+    # or staging folder; a result it kept says how it ended.
+    if code in STOPS:
+        summary = _complete(out) if out is not None else None
+        if code != 128 + int(fuzz.signal) or fuzz.sigint_after is None:
+            return f"exit {code} for {signal.Signals(fuzz.signal).name}"
+        if len(lines) != 1:
+            return f"{len(lines)} lines after a stop, not one"
+        if _leftovers(out) or (family in STUDIES and _study_leftovers(out)):
+            return f"left {_leftovers(out) or _study_leftovers(out)} behind"
+        if summary is not None and summary != before and not (
+                b'"interrupted"' in summary or b'"complete"' in summary):
+            return "a stopped run left a summary neither interrupted nor complete"
+    # A failed or refused run (1, 2) must leave the folder's summary as it was;
+    # an interrupted one (130) may have finished writing first, and says so.
+    if code in (1, 2) and out is not None:
+        after = _complete(out)
+        if after is not None and after != before and b'"complete"' in after:
+            return "a failed run left a complete-looking summary.json"
+    return None
+
+
 def run_cases(n_cases: int, seed: int, valid_runs: int, work: Path, verbose=False) -> dict:
     """Run ``n_cases`` seeded cases in ``work``; returns the counts and failures."""
     debug = os.environ.get("TAICHI_HSDEM_DEBUG")
     os.environ["TAICHI_HSDEM_DEBUG"] = "1"   # a defect shows its traceback here
     fuzz = Fuzzer(work, seed, valid_runs)
-    cwd = os.getcwd()
-    os.chdir(work)                           # default output folders land here
+    home = os.getcwd()
     build = runner.build
     runner.build = fuzz.guarded_build(build)
-    codes, families, failures, slow = Counter(), Counter(), [], []
+    codes, families, failures, known_failures, slow = Counter(), Counter(), [], [], []
+    signalled = Counter()
     t0 = time.perf_counter()
     try:
+        os.chdir(work)
         fuzz.make_checkpoints()
         for k in range(n_cases):
+            cwd = fuzz.begin()
+            os.chdir(cwd)                    # default output folders land here
             family, args = fuzz.case()
             families[family] += 1
             out = _out_of(args, work)
             before = _complete(out) if out is not None else None
-            err, std = io.StringIO(), io.StringIO()
+            tree = _tree(fuzz.folder)
+            given = signal.Signals(fuzz.signal).name if fuzz.sigint_after is not None else None
             t1 = time.perf_counter()
-            problem = None
-            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(std), \
-                    _signal_after(fuzz.sigint_after, fuzz.signal):
-                try:
-                    code = main(list(args))
-                except _Skip:
-                    code = "valid, not run"
-                except BaseException:    # noqa: BLE001 - any escape is the finding
-                    code = "exception"
-                    problem = traceback.format_exc()
+            if fuzz.subprocess:
+                code, text, problem = _as_process(fuzz, args, cwd)
+            else:
+                code, text, problem = _in_process(fuzz, args)
             seconds = time.perf_counter() - t1
-            text = err.getvalue()
             if problem is None:
-                if code not in EXITS and code != "valid, not run":
-                    problem = f"exit {code!r}"
-                elif code not in (0, "valid, not run") and not text.strip():
-                    problem = f"exit {code} without a message"
-                elif "Traceback" in text or "internal error" in text:
-                    problem = "traceback or internal error on stderr"
-            # A stopped run exits 128 + its signal's number with one line and leaves
-            # no lock or staging folder; a result it kept says how it ended.
-            if problem is None and code in STOPS:
-                lines = text.strip().splitlines()
-                summary = _complete(out) if out is not None else None
-                if code != 128 + int(fuzz.signal):
-                    problem = f"exit {code} for {signal.Signals(fuzz.signal).name}"
-                elif len(lines) != 1:
-                    problem = f"{len(lines)} lines after a stop, not one"
-                elif _leftovers(out):
-                    problem = f"left {_leftovers(out)} behind"
-                elif summary is not None and summary != before and not (
-                        b'"interrupted"' in summary or b'"complete"' in summary):
-                    problem = "a stopped run left a summary neither interrupted nor complete"
-            # A failed or refused run (1, 2) must leave the folder's summary as it was;
-            # an interrupted one (130) may have finished writing first, and says so.
-            if problem is None and code in (1, 2) and out is not None:
-                after = _complete(out)
-                if after is not None and after != before and b'"complete"' in after:
-                    problem = "a failed run left a complete-looking summary.json"
+                problem = _check(fuzz, family, args, code, text, out, before, tree, cwd,
+                                 fuzz.folder)
             codes[code] += 1
+            if given is not None:
+                signalled[given, code in STOPS] += 1
             if seconds > 60:
                 slow.append((k, family, args, seconds))
             if problem:
-                failures.append({"case": k, "family": family, "args": args, "code": code,
-                                 "problem": problem, "stderr": text[-3000:]})
+                failure = {"case": k, "family": family, "args": args, "code": code,
+                           "problem": problem, "stderr": text[-3000:]}
+                if known(failure):
+                    known_failures.append(failure)
+                else:
+                    failures.append(failure)
             if verbose:
                 print(f"{k:5d} {family:12s} {str(code):15s} {seconds:6.2f}s "
                       f"{'FAIL ' + problem.splitlines()[-1] if problem else ''}", flush=True)
     finally:
         runner.build = build
-        os.chdir(cwd)
+        os.chdir(home)
         if debug is None:
             os.environ.pop("TAICHI_HSDEM_DEBUG")
         else:
             os.environ["TAICHI_HSDEM_DEBUG"] = debug
     return {"cases": n_cases, "codes": codes, "families": families, "failures": failures,
-            "slow": slow, "runs": fuzz.runs, "seconds": time.perf_counter() - t0}
+            "known": known_failures,
+            "slow": slow, "runs": fuzz.runs, "signalled": signalled,
+            "seconds": time.perf_counter() - t0}
 
 
 def report(res: dict) -> str:
     lines = [f"cases: {res['cases']}   wall time: {res['seconds']:.0f} s   "
-             f"real runs: {res['runs']}   failures: {len(res['failures'])}",
+             f"real runs: {res['runs']}   failures: {len(res['failures'])}   "
+             f"known failures: {len(res['known'])}",
              "exit    count"]
     lines += [f"{str(code):15s} {n}" for code, n in sorted(res["codes"].items(), key=str)]
     lines += ["family  count"] + [f"{f:15s} {n}" for f, n in sorted(res["families"].items())]
+    lines += ["signal  sent  stopped by it (the others ended first)"]
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        sent = res["signalled"][name, True] + res["signalled"][name, False]
+        lines.append(f"{name:7s} {sent:5d} {res['signalled'][name, True]:5d}")
+    kinds = Counter(known(f) for f in res["known"])
+    for name, n in kinds.items():
+        example = next(f for f in res["known"] if known(f) == name)
+        lines.append(f"known ({n} case(s), e.g. {example['case']}): {name}")
     for k, fam, args, s in res["slow"]:
         lines.append(f"slow: case {k} ({fam}) {s:.0f} s: {args!r}"[:400])
     for f in res["failures"]:
