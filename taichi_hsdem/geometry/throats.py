@@ -127,11 +127,28 @@ class Throats:
         within ``radius`` (per point) of ``points``: its midpoint does."""
         if not len(points) or not len(self):
             return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
-        lists = self._tree.query_ball_point(points, radius + self.widths.max() / 2)
+        points = np.asarray(points, dtype=float)
+        reach = np.broadcast_to(np.asarray(radius, dtype=float) + self.widths.max() / 2,
+                                (len(points),))
+        # only points within reach of the midpoints' box can find one (most of a
+        # long inlet's particles cannot): the tree is asked about those alone; the
+        # box is widened a little, so that no pair the tree would find is lost
+        lo, hi = self._box
+        slack = 1e-9 * (np.abs(points).max(axis=1) + reach) + reach
+        ask = np.flatnonzero(np.all((points >= lo - slack[:, None])
+                                    & (points <= hi + slack[:, None]), axis=1))
+        if not len(ask):
+            return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+        lists = self._tree.query_ball_point(points[ask], reach[ask])
         counts = np.fromiter(map(len, lists), dtype=int, count=len(lists))
         throat = np.fromiter(itertools.chain.from_iterable(lists), dtype=int,
                              count=int(counts.sum()))
-        return np.repeat(np.arange(len(points)), counts), throat
+        return np.repeat(ask, counts), throat
+
+    @cached_property
+    def _box(self):
+        """The lower left and upper right corners of the throats' midpoints."""
+        return self.midpoints.min(axis=0), self.midpoints.max(axis=0)
 
 
 def throats_of(geometry) -> Throats:
