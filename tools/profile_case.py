@@ -13,10 +13,15 @@ slower than bench.py's, the shares are what to read. Printed:
 * **phases**: the DEM launches (``Simulation.advance``), the pressure solves
   (the solver's ``solve``: operators, right-hand side, CG, the report read), the
   rest of each fluid update (rasterising the particles, the held forces, reading
-  the pressure back) and the host checks, with the wall time left over;
+  the pressure back) and the host checks (of which a micromodel's throats), with
+  the wall time left over;
 * **kernels**: the ``--top`` most expensive offloaded loops (Taichi names a
   kernel's loops ``<kernel>_c<n>_<k>_kernel_<loop>_<kind>``), with their share of
   the profiled time, their count and mean time;
+* **solves** (the multigrid CG): per solve the iterations, the cells whose
+  permeability changed since the last one, the relative residual after the first
+  and the last iteration and the mean reduction per iteration: how much a solve
+  starts from (a warm start where little moved) and how fast it converges;
 * **the solve's floor**: cells x CG iterations (per solve, the most any
   realization of the batch took: the floor is then an upper bound) x the bytes a
   CG iteration moves per fine cell (``BYTES_PER_CELL_ITERATION``, counted from
@@ -32,6 +37,8 @@ import sys
 import time
 from collections import defaultdict
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -75,7 +82,7 @@ def main(argv=None):
         k["kernel_profiler"] = True
         return init(*a, **k)
     ti.init = with_profiler
-    from taichi_hsdem import Simulation, backend, load_scene
+    from taichi_hsdem import Simulation, backend, load_scene, observables
     from taichi_hsdem.scene import SceneError
     backend.init("cpu", "f64")
     try:
@@ -87,11 +94,13 @@ def main(argv=None):
         p.error(f"case {args.case!r} has no fluid to profile")
     sim.update_fluid(force=True)
     sim.advance(5)                       # compile every kernel before timing
+    solves_seen = _watch_convergence(sim.fluid.solver)
     phases, calls = defaultdict(float), defaultdict(int)
     for obj, name, phase in ((sim, "advance", "DEM steps (advance)"),
                              (sim, "update_fluid", "fluid updates"),
                              (sim.fluid.solver, "solve", "pressure solves"),
-                             (sim, "_check", "host checks")):
+                             (sim, "_check", "host checks"),
+                             (observables, "observe_throats", "throats")):
         bench.time_calls(obj, name, phases, phase, calls)
     stats0 = dict(sim.fluid.solver.stats)
     steps0 = sim.steps
@@ -118,7 +127,10 @@ def main(argv=None):
              f"{iters / max(solves, 1):.1f} CG iterations each"),
             ("rest of the fluid updates", rest_of_updates,
              f"{1e3 * rest_of_updates / max(calls['fluid updates'], 1):.1f} ms per update"),
-            ("host checks", phases["host checks"], f"{calls['host checks']} checks"),
+            ("host checks", phases["host checks"], f"{calls['host checks']} checks" + (
+                f", of which the throats' {phases['throats']:.3f} s "
+                f"({1e3 * phases['throats'] / calls['throats']:.2f} ms per realization and "
+                "check)" if calls["throats"] else "")),
             ("other", wall - phases["DEM steps (advance)"] - phases["fluid updates"]
              - phases["host checks"], "")]
     for name, seconds, note in rows:
@@ -131,6 +143,8 @@ def main(argv=None):
         print(f"  {100 * seconds / total:5.1f} %  {seconds:7.3f} s  {count:6d} x "
               f"{1e3 * seconds / count:8.3f} ms  {name}")
 
+    _print_convergence(solves_seen)
+
     nx, ny = sim.fluid.solver.shape
     cells = nx * ny * sim.R
     if solves and iters:
@@ -141,6 +155,62 @@ def main(argv=None):
               f"{1e3 * floor:.1f} ms per solve; measured {1e3 * measured:.1f} ms, "
               f"{measured / floor:.1f} times the floor; "
               f"{1e9 * measured / (cells * iters / solves):.1f} ns per cell and iteration")
+
+
+# Solves listed one a row (the rest summed up in one).
+SOLVE_ROWS = 10
+
+
+def _watch_convergence(solver):
+    """Per pressure solve of the multigrid CG (fluid/gmg.py): the CG iterations,
+    the cells whose permeability changed since the last solve (the scan's count)
+    and the relative residual ``|r| / |b|`` at each report the host reads (after
+    every iteration on the CPU's ``rows`` way; once, at the end, in the
+    ``realizations`` way), of the realization that took the most iterations.
+    Reads only the report the solver reads anyway. Returns the list it fills."""
+    if not hasattr(solver, "_read_report"):
+        return []                               # pyamg: nothing to watch
+    from taichi_hsdem.fluid._gmg_cg import _REPORT_FLAGS
+    from taichi_hsdem.fluid._gmg_cycle import _BB, _CHANGED, _ITERS, _RR
+    seen, solve, read = [], solver.solve, solver._read_report
+
+    def solve_watched(*a, **k):
+        seen.append([])
+        return solve(*a, **k)
+
+    def read_watched(*a, **k):
+        report = read(*a, **k)
+        if seen:
+            r = int(np.argmax(report[:, _REPORT_FLAGS + _ITERS]))
+            seen[-1].append((int(report[r, _REPORT_FLAGS + _ITERS]),
+                             int(report[r, _REPORT_FLAGS + _CHANGED]),
+                             float(np.sqrt(report[r, _RR] / max(report[r, _BB], 1e-300)))))
+        return report
+    solver.solve, solver._read_report = solve_watched, read_watched
+    return seen
+
+
+def _print_convergence(seen):
+    """The convergence table of _watch_convergence: a row per solve."""
+    rows = [s for s in seen if s]
+    if not rows:
+        return
+    print("\nsolves (the slowest realization): CG iterations, cells whose permeability "
+          "changed, |r|/|b| after the first and the last iteration, the mean reduction "
+          "per iteration")
+    for k, reads in enumerate(rows):
+        if k == SOLVE_ROWS and len(rows) > SOLVE_ROWS + 1:
+            its = [r[-1][0] for r in rows[k:]]
+            print(f"  ... {len(its)} more, {min(its)}-{max(its)} iterations")
+            break
+        iters, changed, first = reads[0]
+        last_iters, _, last = reads[-1]
+        if last_iters > iters and first > 0 and last > 0:
+            trend = (f"{first:9.2e} -> {last:9.2e}  "
+                     f"{(last / first) ** (1.0 / (last_iters - iters)):5.2f} per iteration")
+        else:   # read once, at the end (the realizations way)
+            trend = f"{last:9.2e} at the end"
+        print(f"  {k:3d}  {last_iters:4d} iterations  {changed:9d} changed  {trend}")
 
 
 def _kernel_rows(ti):
