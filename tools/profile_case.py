@@ -4,6 +4,7 @@ kernel's share, and the pressure solve against its memory-traffic floor.
     python tools/profile_case.py channel-10000 --sim-time 0.005
     python tools/profile_case.py disks-0.26-R10 --sim-time 0.5
     python tools/profile_case.py disks-0.26-R10@fluid.solver_tol=1e-8 --top 10
+    python tools/profile_case.py micromodel-1000 --sim-time 0.03 --fixed-twin
 
 A case is one of tools/bench.py's (the same overrides). The run is timed as
 bench.py times it (a few steps first, to compile), once, with Taichi's kernel
@@ -21,7 +22,10 @@ slower than bench.py's, the shares are what to read. Printed:
 * **solves** (the multigrid CG): per solve the iterations, the cells whose
   permeability changed since the last one, the relative residual after the first
   and the last iteration and the mean reduction per iteration: how much a solve
-  starts from (a warm start where little moved) and how fast it converges;
+  starts from (a warm start where little moved) and how fast it converges; with
+  ``--fixed-twin`` each solve's permeability is also solved from the same
+  initial guess without the moving bodies' term (fixed obstacles), to tell what
+  that term costs (the timings then include those solves);
 * **the solve's floor**: cells x CG iterations (per solve, the most any
   realization of the batch took: the floor is then an upper bound) x the bytes a
   CG iteration moves per fine cell (``BYTES_PER_CELL_ITERATION``, counted from
@@ -63,6 +67,10 @@ def main(argv=None):
     p.add_argument("--sim-time", type=float, default=None,
                    help="simulated seconds (default: bench.py's, 0.005 for channel cases)")
     p.add_argument("--top", type=int, default=15, help="kernels to list")
+    p.add_argument("--fixed-twin", action="store_true",
+                   help="also solve each pressure from the same start without the bodies' "
+                        "term (fixed obstacles), for the solves table; the timings then "
+                        "include those solves")
     p.add_argument("--bandwidth", type=float, default=20.0,
                    help="memory bandwidth for the solve's floor, GB/s (default 20)")
     args = p.parse_args(argv)
@@ -94,7 +102,8 @@ def main(argv=None):
         p.error(f"case {args.case!r} has no fluid to profile")
     sim.update_fluid(force=True)
     sim.advance(5)                       # compile every kernel before timing
-    solves_seen = _watch_convergence(sim.fluid.solver)
+    solves_seen = _watch_convergence(sim.fluid.solver,
+                                     _fixed_twin(sim) if args.fixed_twin else None)
     phases, calls = defaultdict(float), defaultdict(int)
     for obj, name, phase in ((sim, "advance", "DEM steps (advance)"),
                              (sim, "update_fluid", "fluid updates"),
@@ -161,40 +170,68 @@ def main(argv=None):
 SOLVE_ROWS = 10
 
 
-def _watch_convergence(solver):
+def _fixed_twin(sim):
+    """A second multigrid solver on the simulation's grid, for --fixed-twin."""
+    from taichi_hsdem.fluid.gmg import TaichiPressureSolver
+    m, fl = sim.model, sim.scene.fluid
+    if not hasattr(sim.fluid.solver, "_read_report"):
+        return None
+    return TaichiPressureSolver(m.fluid_active, m.fluid_dx, m.fluid_dx, fl.viscosity, m.bc(),
+                                n_batch=sim.R, tol=fl.solver_tol, gap=fl.gap)
+
+
+def _watch_convergence(solver, twin=None):
     """Per pressure solve of the multigrid CG (fluid/gmg.py): the CG iterations,
     the cells whose permeability changed since the last solve (the scan's count)
     and the relative residual ``|r| / |b|`` at each report the host reads (after
     every iteration on the CPU's ``rows`` way; once, at the end, in the
     ``realizations`` way), of the realization that took the most iterations.
-    Reads only the report the solver reads anyway. Returns the list it fills."""
+    Reads only the report the solver reads anyway. With ``twin`` (_fixed_twin)
+    each solve's kappa is first solved by it from the same initial guess without
+    the bodies' term, watched the same way. Returns the list it fills: per solve
+    the reads, and the twin's (a second list)."""
     if not hasattr(solver, "_read_report"):
         return []                               # pyamg: nothing to watch
     from taichi_hsdem.fluid._gmg_cg import _REPORT_FLAGS
-    from taichi_hsdem.fluid._gmg_cycle import _BB, _CHANGED, _ITERS, _RR
-    seen, solve, read = [], solver.solve, solver._read_report
+    from taichi_hsdem.fluid._gmg_cycle import _BB, _CHANGED, _ITERS, _RR, _SOL
+    seen = []
 
-    def solve_watched(*a, **k):
-        seen.append([])
-        return solve(*a, **k)
+    def watch(s, slot):
+        read = s._read_report
 
-    def read_watched(*a, **k):
-        report = read(*a, **k)
-        if seen:
-            r = int(np.argmax(report[:, _REPORT_FLAGS + _ITERS]))
-            seen[-1].append((int(report[r, _REPORT_FLAGS + _ITERS]),
-                             int(report[r, _REPORT_FLAGS + _CHANGED]),
-                             float(np.sqrt(report[r, _RR] / max(report[r, _BB], 1e-300)))))
-        return report
-    solver.solve, solver._read_report = solve_watched, read_watched
+        def read_watched(*a, **k):
+            report = read(*a, **k)
+            if seen:
+                r = int(np.argmax(report[:, _REPORT_FLAGS + _ITERS]))
+                seen[-1][slot].append((int(report[r, _REPORT_FLAGS + _ITERS]),
+                                       int(report[r, _REPORT_FLAGS + _CHANGED]),
+                                       float(np.sqrt(report[r, _RR]
+                                                     / max(report[r, _BB], 1e-300)))))
+            return report
+        s._read_report = read_watched
+    watch(solver, 0)
+    if twin is not None:
+        watch(twin, 1)
+    solve = solver.solve
+
+    def solve_watched(kappa, *a, **k):
+        seen.append(([], []))
+        if twin is not None:
+            cg = twin._cg.to_numpy()
+            cg[_SOL] = solver._cg.to_numpy()[_SOL]     # the same initial guess
+            twin._cg.from_numpy(cg)
+            twin.solve(kappa)
+        return solve(kappa, *a, **k)
+    solver.solve = solve_watched
     return seen
 
 
 def _print_convergence(seen):
     """The convergence table of _watch_convergence: a row per solve."""
-    rows = [s for s in seen if s]
+    rows = [s[0] for s in seen if s[0]]
     if not rows:
         return
+    twins = [s[1] for s in seen if s[0]]
     print("\nsolves (the slowest realization): CG iterations, cells whose permeability "
           "changed, |r|/|b| after the first and the last iteration, the mean reduction "
           "per iteration")
@@ -203,14 +240,22 @@ def _print_convergence(seen):
             its = [r[-1][0] for r in rows[k:]]
             print(f"  ... {len(its)} more, {min(its)}-{max(its)} iterations")
             break
-        iters, changed, first = reads[0]
-        last_iters, _, last = reads[-1]
-        if last_iters > iters and first > 0 and last > 0:
-            trend = (f"{first:9.2e} -> {last:9.2e}  "
-                     f"{(last / first) ** (1.0 / (last_iters - iters)):5.2f} per iteration")
-        else:   # read once, at the end (the realizations way)
-            trend = f"{last:9.2e} at the end"
-        print(f"  {k:3d}  {last_iters:4d} iterations  {changed:9d} changed  {trend}")
+        print(f"  {k:3d}  {_trend(reads)}")
+        if twins[k]:
+            print(f"       {_trend(twins[k], changed=False)}  (fixed obstacles, same start)")
+
+
+def _trend(reads, changed=True):
+    """A row of the solves table from one solve's reads."""
+    iters, n_changed, first = reads[0]
+    last_iters, _, last = reads[-1]
+    if last_iters > iters and first > 0 and last > 0:
+        trend = (f"{first:9.2e} -> {last:9.2e}  "
+                 f"{(last / first) ** (1.0 / (last_iters - iters)):5.2f} per iteration")
+    else:   # read once, at the end (the realizations way)
+        trend = f"{last:9.2e} at the end"
+    cells = f"{n_changed:9d} changed" if changed else " " * 17
+    return f"{last_iters:4d} iterations  {cells}  {trend}"
 
 
 def _kernel_rows(ti):
