@@ -16,6 +16,7 @@ the earlier result as it was. An interrupted run writes its results marked
 from __future__ import annotations
 
 import argparse
+import atexit
 import gc
 import os
 import shutil
@@ -416,6 +417,44 @@ def _command(argv) -> int | None:
                              "use fewer points, realizations or particles")
 
 
+#: The signals to ignore once the program's last Python code ran (see
+#: :func:`_ignore_late_signals`); filled when main runs as the program.
+_LATE_SIGNALS: set = set()
+
+
+def _ignore_late_signals() -> None:
+    """The last exit handler (registered when this module loads, before any of
+    Taichi's, so run after them): ignore the stopping signals. The interpreter's
+    finalization then sets a Python handler's signal back to its default action, and
+    one arriving there killed the process silently (exit -2 for a study or run that
+    had ended with 0); ignored, it leaves the exit status main chose."""
+    for sig in _LATE_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+
+
+atexit.register(_ignore_late_signals)
+
+
+def _after_the_end(command: str, code: int) -> None:
+    """Handlers for the process's wind-down once a study's main returned ``code``
+    (Taichi's clean-up): a signal then says that the study had ended and exits at
+    once, 128 + its number after a success, ``code`` otherwise, instead of dying of
+    it silently or with a traceback; past the exit handlers it is ignored
+    (:func:`_ignore_late_signals`). SIGHUP ignored (nohup) stays ignored."""
+    def handler(signum, frame):
+        if code == EXIT_OK:
+            print(f"{command} {describe(signum)} after it had ended: what it wrote is "
+                  "complete", file=sys.stderr, flush=True)
+            os._exit(128 + int(signum))
+        os._exit(code)
+    for name in _Interrupt.SIGNALS:
+        sig = getattr(signal, name, None)
+        if sig is not None and (sig == signal.SIGINT
+                                or signal.getsignal(sig) != signal.SIG_IGN):
+            signal.signal(sig, handler)
+            _LATE_SIGNALS.add(sig)
+
+
 def _failure(exc: Exception, memory_advice: str) -> int:
     """One line and exit 1 for an exception no check caught: out of memory (with
     ``memory_advice``), or a defect of ours (re-raised, for its traceback, when
@@ -440,9 +479,15 @@ def main(argv=None) -> int:
         argv = argv[1:]
     code = _command(argv)
     if code is not None:
+        if not explicit:
+            _after_the_end(argv[0], code)
         return code
     # Called with no arguments, main is the program (python -m taichi_hsdem): the
-    # signal handlers stay while the process winds down.
+    # signal handlers stay while the process winds down, and past the exit handlers
+    # the signals are ignored.
+    if not explicit:
+        _LATE_SIGNALS.update(getattr(signal, name) for name in _Interrupt.SIGNALS
+                             if hasattr(signal, name))
     with _Interrupt(keep=not explicit) as interrupt:
         code = _guarded(argv, interrupt)
         if code == EXIT_OK and interrupt.requested:

@@ -266,3 +266,37 @@ def test_a_polygon_of_coordinates_past_the_magnitudes_is_said_so(size):
     assert info.value.problems[0].startswith(
         f"<dict>: particles[0].vertices: its coordinates (up to {size:.3g} in size")
     assert "outside the magnitudes the simulator computes with" in info.value.problems[0]
+
+
+@pytest.mark.parametrize("when", ["exit handlers", "finalization"])
+def test_a_signal_as_a_study_process_winds_down_keeps_its_outcome(tmp_path, when):
+    """A signal after a study's main returned (Taichi's exit handlers, then the
+    interpreter's finalization, which gives a Python handler's signal back its
+    default action) killed the process silently (-2, found by the fuzzer) or
+    printed a traceback from an exit handler: during the exit handlers it says the
+    study had ended and exits 128 + its number, later it is ignored."""
+    import subprocess
+    import sys
+    import textwrap
+    kill = ("atexit.register(lambda: (os.kill(os.getpid(), signal.SIGTERM), "
+            "time.sleep(0.5)))")
+    code = textwrap.dedent(f"""
+        import atexit, os, signal, sys, time
+        {kill if when == "finalization" else ""}
+        from taichi_hsdem.stop import raise_stop
+        for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            signal.signal(s, raise_stop)
+        from taichi_hsdem.cli import main
+        {kill if when == "exit handlers" else ""}
+        sys.argv = ["taichi_hsdem", "sweep", "--help"]
+        sys.exit(main())
+        """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300, cwd=tmp_path)
+    lines = proc.stderr.strip().splitlines()
+    if when == "exit handlers":
+        assert proc.returncode == 143, proc.stderr
+        assert lines == ["sweep stopped by SIGTERM after it had ended: what it wrote is "
+                         "complete"], lines
+    else:
+        assert proc.returncode == 0 and lines == [], (proc.returncode, proc.stderr)
