@@ -300,3 +300,21 @@ def test_a_signal_as_a_study_process_winds_down_keeps_its_outcome(tmp_path, when
                          "complete"], lines
     else:
         assert proc.returncode == 0 and lines == [], (proc.returncode, proc.stderr)
+
+
+@pytest.mark.parametrize("seed, realizations", [(2 ** 63, 1), (2 ** 63 - 2, 3)])
+def test_a_seed_past_64_bits_is_refused_before_the_run(tmp_path, capsys, seed, realizations):
+    """run.seed = 2^63 ran to its end and then failed writing final_state.npz
+    (OverflowError, "internal error", found by the fuzzer): refused on run.seed."""
+    out = tmp_path / "o"
+    assert main([HOURGLASS, "--out", str(out), "--realizations", str(realizations),
+                 "--set", f"run.seed={seed}", "--set", "run.t_end=0.05", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"run.seed: must be at most {2 ** 63 - realizations}" in err[0]
+    assert not out.exists()
+
+
+def test_the_largest_seed_runs(tmp_path):
+    assert main([HOURGLASS, "--out", str(tmp_path / "o"), "--realizations", "1", "--set",
+                 f"run.seed={2 ** 63 - 1}", "--set", "run.t_end=0.05", "--no-video",
+                 "--quiet"]) == 0

@@ -23,6 +23,9 @@ from .coerce import BAD, Problems, good, show
 from .keys import (AUTO, MAX_MAGNITUDE, MAX_PACKING_FRACTION, MIN_GAP_OVER_DEQ, MIN_MAGNITUDE,
                    SpeciesConfig, key_specs, shape_area, shape_vertex_count, vtk_indices)
 
+#: The largest seed a realization may have: seeds are written as 64-bit integers.
+MAX_SEED = 2 ** 63 - 1
+
 # What Linux file systems take: bytes per file or folder name, and per path.
 MAX_NAME_BYTES = 255
 MAX_PATH_BYTES = 4095
@@ -283,6 +286,11 @@ def _check_scene(scene: dict, species: dict[int, dict], shapes: dict[int, Any],
         out.add("output.dir", f"must be a folder path, got {show(output['dir'])}")
     elif good(output["dir"]) and path_length_problem(output["dir"]):
         out.add("output.dir", path_length_problem(output["dir"]))
+    if (good(run["seed"], run["realizations"])
+            and run["seed"] + run["realizations"] - 1 > MAX_SEED):
+        out.add("run.seed", f"must be at most {MAX_SEED - run['realizations'] + 1} (2^63 - "
+                f"run.realizations): realization k's seed, run.seed + k, is kept as a "
+                f"64-bit integer, got {run['seed']}")
     if good(run["t_end"]):
         if clog["window"] is None:
             clog["window"] = 0.1 * run["t_end"]
