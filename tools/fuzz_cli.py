@@ -388,6 +388,13 @@ KNOWN = {
     "line each: 8000 lines for a 20 x 20 x 20 grid) rather than once":
         lambda f: (f["family"] == "sweep" and f["problem"].endswith("lines on stderr")
                    and ": point " in f["stderr"]),
+    "python -m taichi_hsdem: a signal in the first few tenths of a second (Python's "
+    "start-up and the import of the package's __init__, numpy included, before "
+    "__main__ installs the handlers) ends the process with a KeyboardInterrupt "
+    "traceback (SIGINT) or silently (SIGTERM, SIGHUP)":
+        lambda f: (f["family"] == "study_signal" and (f["after"] or 0) < 0.6
+                   and (f["problem"].startswith("killed by")
+                        or ("KeyboardInterrupt" in f["stderr"] and "cli.py" not in f["stderr"]))),
     "figures --quiet: every point refused at set-up (--realizations 99999999999) exits 1 "
     "with nothing on stderr (the points' FAILED lines are progress, silenced)":
         lambda f: (f["family"] == "figures" and f["code"] == 1 and "--quiet" in f["args"]
@@ -970,6 +977,7 @@ def run_cases(n_cases: int, seed: int, valid_runs: int, work: Path, verbose=Fals
             before = _complete(out) if out is not None else None
             tree = _tree(fuzz.folder)
             given = signal.Signals(fuzz.signal).name if fuzz.sigint_after is not None else None
+            after = fuzz.sigint_after
             t1 = time.perf_counter()
             if fuzz.subprocess:
                 code, text, problem = _as_process(fuzz, args, cwd)
@@ -986,7 +994,7 @@ def run_cases(n_cases: int, seed: int, valid_runs: int, work: Path, verbose=Fals
                 slow.append((k, family, args, seconds))
             if problem:
                 failure = {"case": k, "family": family, "args": args, "code": code,
-                           "problem": problem, "stderr": text[-3000:]}
+                           "problem": problem, "stderr": text[-3000:], "after": after}
                 if known(failure):
                     known_failures.append(failure)
                 else:
