@@ -192,13 +192,14 @@ def draw(series: list[Series], fits: list[Fit | None], out: pathlib.Path) -> Non
     def _draw():
         plt = _pyplot()
         import numpy as np
-        fig, ax = plt.subplots(figsize=(7.0, 4.4), dpi=100)
+        fig, ax = plt.subplots(figsize=(8.6, 4.4), dpi=100)
         colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
         for k, (sr, f) in enumerate(zip(series, fits)):
             c = colors[k % len(colors)]
+            dx = (k - (len(series) - 1) / 2) * 0.05     # side by side at one width
             ok = [p for p in sr.points if not p.censored]
             if ok:
-                x = np.array([p.wd ** 2 for p in ok])
+                x = np.array([p.wd ** 2 + dx for p in ok])
                 y = np.log([p.s for p in ok])
                 lo = np.array([y_ - math.log(p.lo) if p.lo else 0 for y_, p in zip(y, ok)])
                 hi = np.array([math.log(p.hi) - y_ if p.hi else 0 for y_, p in zip(y, ok)])
@@ -206,7 +207,7 @@ def draw(series: list[Series], fits: list[Fit | None], out: pathlib.Path) -> Non
                             label=sr.label)
             cens = [p for p in sr.points if p.censored]
             if cens:
-                ax.plot([p.wd ** 2 for p in cens], [math.log(p.lo) for p in cens], "^",
+                ax.plot([p.wd ** 2 + dx for p in cens], [math.log(p.lo) for p in cens], "^",
                         color=c, mfc="none", ms=7,
                         label=f"{sr.label}: nothing clogged (lower bound)")
             if f is not None:
@@ -220,7 +221,7 @@ def draw(series: list[Series], fits: list[Fit | None], out: pathlib.Path) -> Non
                                                    lambda v: v ** 2))
         top.set_xlabel("W/d")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
+        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
         fig.tight_layout()
         fig.savefig(out)
         plt.close(fig)
