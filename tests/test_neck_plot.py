@@ -65,3 +65,17 @@ def test_a_table_without_the_columns_is_refused_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not a neck table" in err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_realizations_of_one_width_from_several_runs_are_pooled():
+    plot = load_tool("neck_plot")
+    from taichi_hsdem.stats.geometric import mean_escapees
+    esc, clog = [3, 40, 7, 40, 12], [True, False, True, False, True]
+    points = plot.pooled({2.0: (esc, clog), 1.2: ([2, 1], [True, True]),
+                          2.4: ([50, 50], [False, False])})
+    assert [p.wd for p in points] == [1.2, 2.0, 2.4]
+    m, (lo, hi) = mean_escapees(esc, clog)
+    assert (points[1].s, points[1].lo, points[1].hi) == (m, lo, hi)
+    assert (points[1].never, points[1].n) == (2, 5)
+    assert points[2].censored and points[2].lo > 0 and points[2].hi is None
+    assert plot.folder_counts(__import__("pathlib").Path("no such folder")) == {}

@@ -5,10 +5,13 @@ Usage::
     python tools/neck_plot.py SERIES [SERIES ...] [--out PNG] [--quiet]
 
 Each ``SERIES`` is ``[LABEL=]PATH[+PATH...]``: ``PATH`` a folder that
-``tools/neck_study.py`` wrote (its ``neck.csv``) or a CSV with the same columns
+``tools/neck_study.py`` wrote (its finished points, read from their summaries, so a
+study stopped part way counts) or a CSV with the columns of its ``neck.csv``
 (``wd,mean_escapees,ci_lo,ci_hi,never_clogged,n``; ``mean_escapees`` empty where
 nothing clogged, ``ci_lo`` then the one-sided 95 % lower bound); several paths
-joined by ``+`` make one series (the same study run in parts). ``LABEL`` defaults
+joined by ``+`` make one series: folders' realizations at the same W/d are pooled
+(the same study run in parts, or on more seeds), a table's width replaces an
+earlier one's. ``LABEL`` defaults
 to the packing fraction of the folder's first point (``phi = 0.40``), else the
 path's name.
 
@@ -121,6 +124,45 @@ def _packing_fraction(folder: pathlib.Path) -> float | None:
         return None
 
 
+def folder_counts(folder: pathlib.Path) -> dict[float, tuple[list[int], list[bool]]]:
+    """W/d -> (escapees, clogged) of every stable realization in a neck_study
+    folder's finished points (each point's ``summary.json`` and resolved scene);
+    empty when it has none (a table, or a study that has not finished a point)."""
+    import json
+
+    from taichi_hsdem.scene import load_scene
+    out: dict[float, tuple[list[int], list[bool]]] = {}
+    if not folder.is_dir():
+        return out
+    for sub in sorted(folder.iterdir()):
+        if not ((sub / "summary.json").is_file() and (sub / "scene.resolved.toml").is_file()):
+            continue
+        scene = load_scene(sub / "scene.resolved.toml")
+        d = max(sp.d_eq() for sp in scene.particles)
+        wd = round(scene.geometry.constriction_width / d, 9)
+        real = [r for r in json.loads((sub / "summary.json").read_text())["realizations"]
+                if r.get("status") == "ok"]
+        esc, clog = out.setdefault(wd, ([], []))
+        esc += [int(r["escapees"]) for r in real]
+        clog += [bool(r["clogged"]) for r in real]
+    return out
+
+
+def pooled(counts: dict[float, tuple[list[int], list[bool]]]) -> list[Point]:
+    """One point per W/d from its realizations: the censoring-aware ``<s>`` and
+    its 95 % interval (:func:`taichi_hsdem.stats.geometric.mean_escapees`)."""
+    from taichi_hsdem.stats.geometric import mean_escapees
+    out = []
+    for wd in sorted(counts):
+        esc, clog = counts[wd]
+        if not esc:
+            continue
+        m, (lo, hi) = mean_escapees(esc, clog)
+        fin = [v if v is not None and math.isfinite(v) else None for v in (m, lo, hi)]
+        out.append(Point(wd, *fin, never=len(esc) - sum(clog), n=len(esc)))
+    return out
+
+
 def parse_series(text: str) -> Series:
     if all(pathlib.Path(t).exists() for t in text.split("+") if t):
         label, paths = "", text         # a path may hold "=" (a point's folder)
@@ -130,9 +172,18 @@ def parse_series(text: str) -> Series:
     if not parts:
         raise ValueError(f"{text!r}: no path")
     points: dict[float, Point] = {}
+    counts: dict[float, tuple[list[int], list[bool]]] = {}
     for part in parts:
-        for p in read_table(part):
-            points[p.wd] = p            # a later part replaces an earlier width
+        found = folder_counts(part)
+        if not found:
+            for p in read_table(part):
+                points[p.wd] = p        # a table: a later part replaces a width
+        for wd, (esc, clog) in found.items():
+            counts.setdefault(wd, ([], []))
+            counts[wd][0].extend(esc)
+            counts[wd][1].extend(clog)
+    for p in pooled(counts):            # folders: a width's realizations pooled
+        points[p.wd] = p
     if not label:
         phi = _packing_fraction(parts[0]) if parts[0].is_dir() else None
         label = f"phi = {phi:.2f}" if phi is not None else parts[0].stem
