@@ -227,7 +227,7 @@ def test_simplicity_check_of_a_large_polygon_is_fast_and_exact():
      "[[[1e-3, 1e-4], [2e-3, 1e-4], [1.5e-3, 1e-4]]]", "geometry.obstacles[0]", "zero area"),
     ("[[0.0, 0.0], [3e-3, 0.0], [3e-3, 4e-4], [0.0, 4e-4]]",
      "[[[1e-3, 1e-4], [2e-3, 2e-4], [2e-3, 1e-4], [1e-3, 2e-4]]]", "geometry.obstacles[0]",
-     "zero area"),
+     "self-intersecting"),
     ("[[0.0, 0.0], [3e-3, 0.0], [3e-3, 4e-4], [0.0, 4e-4]]",
      "[[[1e-3, 1e-4], [4e-3, 1e-4], [1e-3, 2e-4]]]", "geometry.obstacles[0]",
      "strictly inside"),

@@ -550,9 +550,11 @@ def test_packing_fractions_sum():
      ['particles[0].vertices[2]: expected [x, y] with two finite numbers, got array '
       '[1, "x"]']),
     ({"shape": "polygon", "vertices": [[0, 0], [1, 1], [1, 0], [0, 1]]},
-     ["particles[0].vertices: the polygon has zero area"]),
+     ["particles[0].vertices: edges 0 and 2 cross or touch: the polygon is "
+      "self-intersecting (not simple)"]),
     ({"shape": "polygon", "vertices": [[0, 0], [2, 0], [2, 1], [0, 2], [2, 3]]},
-     ["particles[0].vertices: edges 2 and 4 cross or touch: the polygon is not simple"]),
+     ["particles[0].vertices: edges 2 and 4 cross or touch: the polygon is "
+      "self-intersecting (not simple)"]),
     ({"shape": "polygon", "vertices": [[0, 0], [1, 0], [1, 1], [0, 0]]},
      ["particles[0].vertices: the last vertex repeats the first; the polygon closes "
       "itself, leave the repeat out"]),
