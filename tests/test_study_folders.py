@@ -23,10 +23,11 @@ TINY = {"run.t_end": 0.3}
 POINT = point_folder({"particles.friction": 0.2})
 
 
-def sweep_file(folder: Path, name="s.toml", frictions=(0.2,), t_end=0.3) -> Path:
+def sweep_file(folder: Path, name="s.toml", frictions=(0.2,), t_end=0.3,
+               realizations=1) -> Path:
     path = folder / name
     path.write_text(f'scene = "{HOURGLASS.as_posix()}"\n[common]\n"run.t_end" = {t_end}\n'
-                    f'"run.realizations" = 1\n[grid]\n"particles.friction" = '
+                    f'"run.realizations" = {realizations}\n[grid]\n"particles.friction" = '
                     f'[{", ".join(map(str, frictions))}]\n')
     return path
 

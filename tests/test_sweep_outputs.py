@@ -5,32 +5,16 @@ import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
 from taichi_hsdem import output
 from taichi_hsdem.scene import load_scene
-from taichi_hsdem.studies import sweep as sweep_module
 from taichi_hsdem.studies import progress, sweep_plot
 from taichi_hsdem.studies.sweep import SweepError, command_line_sets, point_folder, \
     quick_overrides, run_sweep
 
-ROOT = Path(__file__).resolve().parents[1]
-HOURGLASS = ROOT / "scenes" / "hourglass24.toml"
-
-
-def sweep_file(folder: Path, frictions=(0.2, 0.4), t_end=0.3, realizations=3) -> Path:
-    path = folder / "s.toml"
-    path.write_text(f'scene = "{HOURGLASS.as_posix()}"\n[common]\n"run.t_end" = {t_end}\n'
-                    f'"run.realizations" = {realizations}\n[grid]\n"particles.friction" = '
-                    f'[{", ".join(map(str, frictions))}]\n')
-    return path
-
-
-def sweep(argv, capsys):
-    code = sweep_module.main([*map(str, argv), "--quiet"])
-    return code, capsys.readouterr().err.strip().splitlines()
+from test_study_folders import HOURGLASS, sweep, sweep_file
 
 
 # ----------------------------------------------------------------------- quick
@@ -42,8 +26,8 @@ def test_quick_keeps_each_point_s_t_end_and_records_what_ran(tmp_path, capsys):
     assert quick_overrides(scene) == {"run.realizations": 2}
     assert quick_overrides(load_scene(HOURGLASS, ["run.realizations=1"])) == \
         {"run.realizations": 1}
-    code, err = sweep([sweep_file(tmp_path, frictions=(0.3,)), "--quick", "--out",
-                       tmp_path / "o"], capsys)
+    code, err = sweep([sweep_file(tmp_path, frictions=(0.3,), realizations=3), "--quick",
+                       "--out", tmp_path / "o"], capsys)
     assert code == 0, err
     folder = tmp_path / "o" / "quick" / point_folder({"particles.friction": 0.3})
     summary = json.loads((folder / "summary.json").read_text())
@@ -60,7 +44,7 @@ def test_quick_keeps_each_point_s_t_end_and_records_what_ran(tmp_path, capsys):
 # ----------------------------------------------------------------------- --set
 
 def test_set_applies_to_every_point_and_a_swept_key_is_refused(tmp_path, capsys):
-    path = sweep_file(tmp_path, realizations=1)
+    path = sweep_file(tmp_path, frictions=(0.2, 0.4))
     out = tmp_path / "o"
     code, err = sweep([path, "--out", out, "--set", "run.t_end=0.1",
                        "--set", "particles.restitution=0.5"], capsys)
@@ -156,8 +140,9 @@ def test_progress_says_each_long_point_s_time_and_the_points_left(monkeypatch):
     clock = iter([0.0, 10.0, 20.0])
     monkeypatch.setattr(progress.time, "perf_counter", lambda: next(clock))
     eta = progress.Eta(3)                                   # t0 = 0
-    assert eta.done() == "; 2 of 3 point(s) left, about 20 s"   # 10 s a point
-    assert eta.done() == "; 1 of 3 point(s) left, about 10 s"
+    assert eta.done() == "2 of 3 point(s) left, about 20 s"     # 10 s a point
+    assert eta.done() == "1 of 3 point(s) left, about 10 s"
+    assert eta.done() == ""                                     # the last
     assert progress.duration(600) == "10 min" and progress.duration(7200) == "2.0 h"
 
     lines = []

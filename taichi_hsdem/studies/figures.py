@@ -395,7 +395,7 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
             print(summary_line(command, run, _point_row(command, run)), flush=True)
             left = eta.done()
             if left:
-                say(left[2:])
+                say(left)
 
         if todo:
             say(f"running {len(todo)} point(s)" + (f" on the cluster {cluster}" if cluster else ""))

@@ -8,7 +8,7 @@ from typing import Callable
 
 class Eta:
     """The points left and, from the mean time of the points run so far, how long
-    they will take: ``"; 3 of 8 points left, about 2 min"``."""
+    they will take: ``"3 of 8 point(s) left, about 2 min"`` ("" after the last)."""
 
     def __init__(self, n: int):
         self.n, self.finished, self.t0 = n, 0, time.perf_counter()
@@ -19,7 +19,7 @@ class Eta:
         if left <= 0:
             return ""
         per = (time.perf_counter() - self.t0) / self.finished
-        return f"; {left} of {self.n} point(s) left, about {duration(per * left)}"
+        return f"{left} of {self.n} point(s) left, about {duration(per * left)}"
 
 
 def duration(seconds: float) -> str:

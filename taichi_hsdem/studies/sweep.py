@@ -318,6 +318,7 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
         head = f"[{k + 1}/{total}] {folder}"
         rows[k] = _row(folder, points[k], status, summary, message)
         left = clock.done()
+        left = f"; {left}" if left else ""
         if summary is None:
             say(f"{head}: {'refused' if status == 'invalid' else 'failed'}: {message}{left}")
             return

@@ -16,6 +16,9 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from ..report import without_library_warnings
+from .plots import pyplot
+
 #: The most series drawn (one per combination of the other changing keys).
 MAX_SERIES = 10
 
@@ -72,61 +75,60 @@ def plot_sweep(rows: Sequence[Mapping], path: Path, title: str = "") -> bool:
     if not points:
         return False
     try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
     except ImportError:
         return False
-    import warnings
+    _draw(plt, points, Path(path), title)
+    return True
+
+
+@without_library_warnings
+def _draw(plt, points, path: Path, title: str) -> None:
     x_key, others = axes_of([row for row, _ in points])
     series: dict[str, list] = {}
     for k, (row, e) in enumerate(points):
         name = ", ".join(f"{key}={row['overrides'].get(key)}" for key in others)
         series.setdefault(name, []).append((k, row, e))
-    path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp.png")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=110)
-        try:
-            top = max(e[0] for _, e in points)
-            finite_hi = [e[2] for _, e in points if math.isfinite(e[2])]
-            cap = max([top, *finite_hi]) * 2.0
-            for n, (name, members) in enumerate(series.items()):
-                if n == MAX_SERIES:
-                    break
-                xs = [_number(row["overrides"][x_key]) if x_key else k for k, row, _ in members]
-                color = f"C{n % 10}"
-                for x, (_, _, (y, lo, hi, is_bound)) in zip(xs, members):
-                    up = hi if math.isfinite(hi) else cap
-                    ax.plot([x, x], [lo, up], color=color, lw=1.2)
-                    if not math.isfinite(hi):
-                        ax.annotate("", xy=(x, cap * 1.25), xytext=(x, cap),
-                                    arrowprops=dict(arrowstyle="->", color=color, lw=1.2))
-                    ax.plot([x], [y], "^" if is_bound else "o", color=color,
-                            mfc="none" if is_bound else color, ms=7)
-                ax.plot([], [], "o", color=color, label=name or "<s>, 95 % interval")
-            if any(e[3] for _, e in points):
-                ax.plot([], [], "^", color="0.3", mfc="none",
-                        label="nothing clogged: 95 % lower bound")
-            ax.set_yscale("log")
-            ax.set_ylim(min(e[1] for _, e in points) / 1.5, cap * 1.6)
-            ax.set_ylabel("<s> (escapees before a clog)")
-            if x_key:
-                ax.set_xlabel(x_key)
-            else:
-                ax.set_xticks(range(len(points)))
-                ax.set_xticklabels([row["folder"] for row, _ in points], rotation=30,
-                                   ha="right", fontsize=7)
-            if len(series) > MAX_SERIES:
-                title += f" (first {MAX_SERIES} of {len(series)} series)"
-            ax.set_title(title, fontsize=9)
-            ax.legend(fontsize=7)
-            fig.tight_layout()
-            fig.savefig(tmp, format="png")
-            os.replace(tmp, path)
-        finally:
-            plt.close(fig)
-            if tmp.exists():
-                tmp.unlink()
-    return True
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=110)
+    try:
+        top = max(e[0] for _, e in points)
+        finite_hi = [e[2] for _, e in points if math.isfinite(e[2])]
+        cap = max([top, *finite_hi]) * 2.0
+        for n, (name, members) in enumerate(series.items()):
+            if n == MAX_SERIES:
+                break
+            xs = [_number(row["overrides"][x_key]) if x_key else k for k, row, _ in members]
+            color = f"C{n % 10}"
+            for x, (_, _, (y, lo, hi, is_bound)) in zip(xs, members):
+                up = hi if math.isfinite(hi) else cap
+                ax.plot([x, x], [lo, up], color=color, lw=1.2)
+                if not math.isfinite(hi):
+                    ax.annotate("", xy=(x, cap * 1.25), xytext=(x, cap),
+                                arrowprops=dict(arrowstyle="->", color=color, lw=1.2))
+                ax.plot([x], [y], "^" if is_bound else "o", color=color,
+                        mfc="none" if is_bound else color, ms=7)
+            ax.plot([], [], "o", color=color, label=name or "<s>, 95 % interval")
+        if any(e[3] for _, e in points):
+            ax.plot([], [], "^", color="0.3", mfc="none",
+                    label="nothing clogged: 95 % lower bound")
+        ax.set_yscale("log")
+        ax.set_ylim(min(e[1] for _, e in points) / 1.5, cap * 1.6)
+        ax.set_ylabel("<s> (escapees before a clog)")
+        if x_key:
+            ax.set_xlabel(x_key)
+        else:
+            ax.set_xticks(range(len(points)))
+            ax.set_xticklabels([row["folder"] for row, _ in points], rotation=30,
+                               ha="right", fontsize=7)
+        if len(series) > MAX_SERIES:
+            title += f" (first {MAX_SERIES} of {len(series)} series)"
+        ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(tmp, format="png")
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if tmp.exists():
+            tmp.unlink()
