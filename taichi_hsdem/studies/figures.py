@@ -78,10 +78,10 @@ diameters square (the count-based scenes scaled to the same areal fraction) so
 that particles reach the constriction soon. The disk figures run to
 :data:`~.points.QUICK_T_END` (3 s, stopping at a clog): they clog as the full
 figure does, with wide intervals (``friction --quick``: 9 of 9 clogged, 18 s on
-two busy cores). The level-set figures (``shapes``, ``polygons``) run 0.3 s on a
-fluid cell of ``d_b / 5``, before their first clogs (a clogging quick polygon
-point took 2 minutes here): they check the chain, their ``<s>`` are lower
-bounds. Its numbers are not the paper's statistics. ``--set`` overrides
+2 cores). The level-set figures (``shapes``, ``polygons``) run 0.3 s on a fluid
+cell of ``d_b / 5``, before their first clogs (``polygons --quick --set
+run.t_end=2``: 126 s for the triangles' point on 2 cores, one of its two
+realizations clogged): they check the chain, their ``<s>`` are lower bounds. Its numbers are not the paper's statistics. ``--set`` overrides
 (applied after the command's and ``--quick``'s own, before the point's varied
 value) change anything else.
 
