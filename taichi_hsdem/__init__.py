@@ -16,17 +16,22 @@ Examples
 """
 from .version import __version__
 
-from .scene import Scene, SceneError, load_scene, scene_to_toml  # noqa: E402
-
-_LAZY = ("Result", "RunError", "Simulation")
+# Every name below is imported on first use: the simulator imports Taichi (about a
+# second), the scene numpy (a few tenths); the pressure-solver worker processes
+# (:mod:`.fluid.worker`) need neither, and ``python -m taichi_hsdem`` installs its
+# signal handlers before either loads, so that a Ctrl-C or SIGTERM at any moment
+# of the set-up is answered with one line.
+_LAZY = {"Scene": "scene", "SceneError": "scene", "load_scene": "scene",
+         "scene_to_toml": "scene", "Result": "simulation", "RunError": "simulation",
+         "Simulation": "simulation"}
 
 
 def __getattr__(name):
-    # The simulator imports Taichi (about a second); the pressure-solver worker
-    # processes (:mod:`.fluid.worker`) import this package and never need it.
     if name in _LAZY:
-        from . import simulation
-        return getattr(simulation, name)
+        from importlib import import_module
+        value = getattr(import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
     raise AttributeError(f"module 'taichi_hsdem' has no attribute {name!r}")
 
 
@@ -37,6 +42,7 @@ def run(scene, overrides=(), progress=None, on_phase=None):
     t_end)`` is called as the run goes on, ``on_phase(what)`` as each phase of the
     set-up begins (10-30 s on a first run, while Taichi compiles), e.g. ``print``.
     """
+    from .scene import Scene, load_scene
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:

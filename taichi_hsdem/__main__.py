@@ -1,21 +1,25 @@
 import signal
 import sys
 
-from .stop import Stopped, describe, raise_stop
+from .stop import describe
 
 # Ctrl-C, SIGTERM and SIGHUP obeyed from the start with one line and 128 + the
 # signal's number, also where the shell started this process with SIGINT ignored (a
-# background job of a script); SIGHUP ignored (nohup) stays ignored. The command
-# line's own handler takes over in main().
+# background job of a script); SIGHUP ignored (nohup) stays ignored. While the
+# command line's modules load (numpy, Taichi: about a second) a signal is noted, not
+# raised: raised inside a C extension's initialisation it would come out as that
+# library's ImportError. The command line's own handler takes over in main().
+_received = []
 for _name in ("SIGINT", "SIGTERM", "SIGHUP"):
     _sig = getattr(signal, _name, None)
     if _sig is not None and (_sig == signal.SIGINT
                              or signal.getsignal(_sig) != signal.SIG_IGN):
-        signal.signal(_sig, raise_stop)
+        signal.signal(_sig, lambda signum, frame: _received.append(signum))
 try:
     from .cli import main
-except Stopped as exc:
-    print(f"{describe(exc.signum)} during set-up: nothing was written", file=sys.stderr)
-    sys.exit(128 + int(exc.signum))
+finally:
+    if _received:
+        print(f"{describe(_received[0])} during set-up: nothing was written", file=sys.stderr)
+        sys.exit(128 + int(_received[0]))
 
 sys.exit(main())

@@ -511,6 +511,10 @@ def _guarded(argv, interrupt) -> int:
         print(f"{interrupt.what} during set-up: nothing was written", file=sys.stderr)
         return interrupt.code
     except Exception as exc:         # a defect of ours: one line, not a traceback
+        if interrupt.signum is not None and interrupt.phase == interrupt.SETUP:
+            # the stop, raised inside a library's C code, came out as its error
+            print(f"{interrupt.what} during set-up: nothing was written", file=sys.stderr)
+            return interrupt.code
         return _failure(exc, "the scene needs more memory than this machine gave; use "
                              "fewer realizations, particles, nodes or a coarser "
                              "fluid.cell_size")

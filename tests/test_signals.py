@@ -284,3 +284,61 @@ def test_after_a_stop_taichis_half_built_objects_do_not_print_tracebacks(monkeyp
         gc.collect()
     assert seen == ["ours"]
     assert sys.unraisablehook != interrupt._unraisable            # restored
+
+
+def test_the_package_loads_nothing_heavy_before_the_handlers(tmp_path):
+    """``python -m taichi_hsdem`` imports the package before its ``__main__`` installs
+    the signal handlers: that import must not load numpy or Taichi (it did, through
+    the scene, a few tenths of a second in which a signal gave a traceback)."""
+    res = _python("""
+        import sys, time
+        t0 = time.perf_counter()
+        import taichi_hsdem
+        dt = time.perf_counter() - t0
+        heavy = sorted(m for m in ("numpy", "taichi", "scipy") if m in sys.modules)
+        print(heavy, dt)
+        assert taichi_hsdem.Scene.__name__ == "Scene"     # still there, on first use
+        assert "numpy" in sys.modules
+    """, tmp_path)
+    assert res.returncode == 0, res.stderr
+    heavy, dt = res.stdout.rsplit("]", 1)
+    assert heavy == "[", res.stdout
+
+
+def test_a_signal_while_the_modules_load_says_one_line(tmp_path):
+    """SIGTERM sent as Taichi starts to load (from an import hook, so at a known
+    moment): noted, and answered once the import has finished, with one line and
+    143; raised inside a C extension's initialisation it would have come out as
+    that library's ImportError."""
+    res = _python(f"""
+        import os, runpy, signal, sys
+        class Hook:
+            def find_spec(self, name, path=None, target=None):
+                if name == "taichi":
+                    sys.meta_path.remove(self)
+                    os.kill(os.getpid(), signal.SIGTERM)
+                return None
+        sys.meta_path.insert(0, Hook())
+        sys.argv = ["taichi_hsdem", {HOURGLASS!r}, "--out", "o", "--quiet"]
+        runpy.run_module("taichi_hsdem", run_name="__main__")
+    """, tmp_path)
+    assert res.returncode == 143, res.stderr
+    assert res.stderr.strip() == "stopped by SIGTERM during set-up: nothing was written"
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_stop_that_a_library_turned_into_its_own_error_is_a_stop(monkeypatch, capsys):
+    """A signal during set-up raised inside a library's C code comes back as that
+    library's error (Taichi's "ImportError: initialization failed"): it is still
+    the user's stop (128 + the number, one line), not an internal error."""
+    from taichi_hsdem import cli
+
+    def _main(args, interrupt):
+        interrupt.signum = signal.SIGTERM
+        raise ImportError("initialization failed")
+
+    monkeypatch.setattr(cli, "_main", _main)
+    interrupt = _Interrupt()
+    assert cli._guarded([HOURGLASS], interrupt) == 143
+    assert capsys.readouterr().err.strip() == \
+        "stopped by SIGTERM during set-up: nothing was written"
