@@ -294,7 +294,7 @@ class Simulation:
         stop early and catch up once the host has grown the capacities."""
         self._fused_launch(n)
         batch = self.batch
-        done = self.done.to_numpy()      # -1: went bad or not running (fused.disk_steps)
+        done = self.done.to_numpy()      # -1: went bad or not running (fused.steps)
         remaining = np.where(done >= 0, n - done, 0)
         if remaining.any():
             running = batch.running.to_numpy()
@@ -314,8 +314,9 @@ class Simulation:
         m = self.model
         self.run_state.launches += 1
         fused.run_steps(k, self.bodies, self.batch, self.particles, self.materials,
-                        self.walls, self.history, self.neighbors, self.flags, self.done,
-                        self.builds, self.dt, m.x_escape)
+                        self.templates, self.walls, self.history, self.neighbors, self.flags,
+                        self.done, self.builds, self.dt, m.x_escape, not m.all_disks,
+                        self.scene.contact.normalize_by_nodes)
 
     def _step_per_body(self, n: int):
         """``n`` steps, three kernels each (four on a GPU). On the CPU the host

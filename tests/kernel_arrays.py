@@ -55,7 +55,7 @@ def _exercise():
     for scene, sets in ((ROOT / "scenes/vani_phi026.toml", {"run.stepping": "per_step",
                                                              "fluid.enabled": False,
                                                              "particles.0.kn": 0.1}),
-                        (ROOT / "scenes/squares.toml", {})):
+                        (ROOT / "scenes/squares.toml", {"run.stepping": "per_step"})):
         values = {"run.realizations": 1, **sets}
         sc = load_scene(scene, overrides=[f"{k}={json.dumps(v)}" for k, v in values.items()])
         sim = Simulation(sc)

@@ -61,7 +61,7 @@ def test_kernels_take_at_most_16_parameters(module):
 
 def test_the_widest_dem_kernels_fit_taichis_argument_limit():
     from taichi_hsdem.dem import contact, fused, integrate, neighbors
-    for kernel in (contact.ls_contacts, contact.disk_contacts, fused.disk_steps,
+    for kernel in (contact.ls_contacts, contact.disk_contacts, fused.steps,
                    integrate.advance_kernel, neighbors.build_neighbors):
         n = sum(elements(p.annotation) for p in inspect.signature(kernel).parameters.values())
         assert n <= MAX_ELEMENTS, (kernel.__name__, n)
@@ -131,4 +131,4 @@ def test_every_task_a_gpu_run_launches_reads_at_most_31_arrays():
     for name in GPU_KERNELS:
         assert any(k.endswith(name) for k in ours), (name, sorted(ours))
     assert all(0 < v <= MAX_ARRAYS for v in ours.values()), ours
-    assert not any(k.endswith(("contact.ls_contacts", "fused.disk_steps")) for k in ours)
+    assert not any(k.endswith(("contact.ls_contacts", "fused.steps")) for k in ours)

@@ -228,8 +228,9 @@ def _fluid_grid(res: _Resolution, model: Model, nx: int, ny: int) -> None:
 
 
 def _resolve_stepping(model: Model, arch: str, values: dict, notes: dict) -> None:
-    """``run.stepping``: the fused stepper for disks with held fluid forces on the
-    CPU (many steps per kernel launch, one realization per thread); on a GPU the
+    """``run.stepping``: the fused stepper with held fluid forces on the CPU (many
+    steps per kernel launch, one realization per thread; disks and level-set
+    shapes alike); on a GPU the
     per-step path, whose kernels take a thread per body (docs/performance.md,
     "GPU-shaped kernels"). Also notes what ``run.arch = "auto"`` chose and why."""
     sc = model.scene
@@ -237,8 +238,6 @@ def _resolve_stepping(model: Model, arch: str, values: dict, notes: dict) -> Non
         notes["run.arch"] = f"{arch}: {backend.auto_reason()}"
     given = sc.run.stepping
     blockers = []
-    if not model.all_disks:
-        blockers.append("the particles are not all disks on the analytic path")
     if sc.fluid.enabled and sc.fluid.force_update == "step":
         blockers.append('fluid.force_update = "step" re-evaluates the fluid force every step')
     if given == "fused" and arch in GPU_ARCHS:
@@ -253,8 +252,8 @@ def _resolve_stepping(model: Model, arch: str, values: dict, notes: dict) -> Non
         return
     fused = arch not in GPU_ARCHS and not blockers
     if fused:
-        why = ("disks with held fluid forces on the CPU: many steps per kernel "
-               "launch, one realization per thread")
+        why = ("held fluid forces on the CPU: many steps per kernel launch, one "
+               "realization per thread")
     elif blockers:
         why = "per_step: " + "; ".join(blockers)
     else:

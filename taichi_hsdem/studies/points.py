@@ -38,9 +38,11 @@ QUICK_CLOG_WINDOW = 0.15        # s
 QUICK_CELLS_PER_DB = 5.0        # quick mode, level-set scenes: fluid cell d_b / 5
 
 
-#: quick mode, disk scenes: long enough to clog (the vani scene's first escapes
-#: come at about 0.5 s, its clogs after <s> = 8 of them at 11 a second; at 0.5 s,
-#: as before, nothing had clogged); a run that clogs stops there
+#: quick mode: long enough to clog (the vani scene's first escapes come at about
+#: 0.5 s, its clogs after <s> = 8 of them at 11 a second; at 0.5 s, as before,
+#: nothing had clogged); a run that clogs stops there. The level-set figures' too,
+#: since their steps run many to a launch (about 12 s of wall time a simulated
+#: second for the quick polygons' point, 170 before)
 QUICK_T_END = 3.0               # s
 
 
@@ -56,10 +58,10 @@ SPEC = {
     "friction": dict(scene="vani_phi026.toml", fixed=["run.stop_at_clog=true"],
                      quick_realizations=3, quick_t_end=QUICK_T_END, level_set=False),
     "shapes": dict(scene="squares.toml", fixed=["run.stop_at_clog=true", "particles.friction=0.4"],
-                   quick_realizations=2, quick_t_end=0.3, level_set=True),
+                   quick_realizations=2, quick_t_end=QUICK_T_END, level_set=True),
     "polygons": dict(scene="polygons.toml",
                      fixed=["run.stop_at_clog=true", "particles.friction=0.4"],
-                     quick_realizations=2, quick_t_end=0.3, level_set=True),
+                     quick_realizations=2, quick_t_end=QUICK_T_END, level_set=True),
 }
 
 
