@@ -93,8 +93,58 @@ def _point_models(folder: Path):
         if not data.get("finals"):
             raise ArchError(f"{path}: no final states (point files written before they were "
                             f"kept); rerun the figure with --no-resume")
-        out.append((p["label"], resolve(scene.with_values({"run.realizations": 1})), data))
+        model = resolve(scene.with_values({"run.realizations": 1}))
+        problem = _point_problem(data, len(model.species))
+        if problem:
+            raise ArchError(f"{path}: damaged point file: {problem}; rerun the figure with "
+                            "--no-resume")
+        out.append((p["label"], model, data))
     return out
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _point_problem(data: dict, n_species: int) -> str | None:
+    """What a point file's ``rows`` and ``finals`` lack that :func:`analyse_folder`
+    and :func:`draw` read, or None: every row an object with its seed, escapees,
+    clogged and status; the final state of each clogged realization an object of
+    equally long lists ``x`` (pairs of finite numbers), ``theta`` (finite
+    numbers), ``alive`` and ``species`` (indices of the scene's species)."""
+    finals = data["finals"]
+    if not isinstance(finals, dict):
+        return '"finals" is not an object'
+    for k, r in enumerate(data["rows"]):
+        if not (isinstance(r, dict) and all(key in r for key in
+                                            ("seed", "escapees", "clogged", "status"))):
+            return f'row {k} lacks its "seed", "escapees", "clogged" or "status"'
+        if not (isinstance(r["seed"], int) and not isinstance(r["seed"], bool)
+                and isinstance(r["status"], str)
+                and (r["escapees"] is None or _is_number(r["escapees"]))):
+            return f'row {k}: its "seed", "escapees" or "status" is of the wrong type'
+        if r["status"] != "ok" or not r["clogged"] or str(r["seed"]) not in finals:
+            continue
+        fs = finals[str(r["seed"])]
+        where = f'the final state of seed {r["seed"]}'
+        if not (isinstance(fs, dict) and all(isinstance(fs.get(key), list) for key in
+                                             ("x", "theta", "alive", "species"))):
+            return f'{where} lacks its "x", "theta", "alive" or "species" list'
+        n = len(fs["x"])
+        if any(len(fs[key]) != n for key in ("theta", "alive", "species")):
+            return f'{where}: "x", "theta", "alive" and "species" differ in length'
+        if not all(isinstance(xi, list) and len(xi) == 2 and all(map(_is_number, xi))
+                   for xi in fs["x"]):
+            return f'{where}: "x" is not a list of pairs of finite numbers'
+        if not all(map(_is_number, fs["theta"])):
+            return f'{where}: "theta" is not a list of finite numbers'
+        if not all(isinstance(a, (bool, int)) for a in fs["alive"]):
+            return f'{where}: "alive" is not a list of booleans'
+        if not all(isinstance(sp, int) and not isinstance(sp, bool) and 0 <= sp < n_species
+                   for sp in fs["species"]):
+            return (f'{where}: "species" holds other than the scene\'s species indices '
+                    f'(0 to {n_species - 1})')
+    return None
 
 
 def _figure_json_problem(fig) -> str | None:
