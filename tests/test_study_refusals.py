@@ -3,11 +3,14 @@ on stderr in the user's terms and exit 2, writes nothing when refused before any
 work, and never a traceback."""
 import json
 import os
+import sys
 from pathlib import Path
 
 import pytest
 
-from taichi_hsdem.studies import arches
+from taichi_hsdem.studies import arches, calibrate, figures
+from taichi_hsdem.studies import cluster as cluster_module
+from taichi_hsdem.studies import sweep as sweep_module
 
 from test_arches import _figure_folder
 
@@ -56,3 +59,81 @@ def test_arches_on_a_damaged_point_file_is_one_line_naming_it(tmp_path, capsys, 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(path) in err[0] and words in err[0], err
     assert sorted(os.listdir(folder)) == ["figure.json", "points"]
+
+
+# --------------------------------- 2. --cluster refused before the folder is made
+
+NOBODY = "tcp://127.0.0.1:1"          # nothing listens there
+
+
+def _studies(tmp_path, out, cluster):
+    """The three studies' argument lists into ``out`` with ``--cluster cluster``."""
+    from test_study_folders import sweep_file
+    tail = ["--out", str(out), "--cluster", cluster, "--quiet"]
+    return {
+        "sweep": (sweep_module.main, [str(sweep_file(tmp_path, t_end=0.05)), *tail]),
+        "figures": (figures.main, ["friction", "--quick", "--set", "run.t_end=0.05",
+                                   "--realizations", "1", *tail]),
+        "calibrate": (calibrate.main, [str(HOURGLASS), "--target", "3", "--lo", "0.2",
+                                       "--hi", "0.6", "--realizations", "1", "--rounds",
+                                       "2", "--set", "run.t_end=0.05", *tail]),
+    }
+
+
+@pytest.mark.parametrize("cluster", [NOBODY, "local:x", "dask-missing"])
+@pytest.mark.parametrize("study", ["sweep", "figures", "calibrate"])
+def test_a_cluster_that_cannot_be_used_is_refused_before_the_folder_is_made(
+        tmp_path, capsys, monkeypatch, study, cluster):
+    monkeypatch.setattr(cluster_module, "CONNECT_TIMEOUT", 1)
+    if cluster == "dask-missing":       # as if the cluster extra were not installed
+        monkeypatch.setitem(sys.modules, "distributed", None)
+        cluster = "local:1"
+    out = tmp_path / "out"
+    main, argv = _studies(tmp_path, out, cluster)[study]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"--cluster {cluster}"), err
+    assert "Traceback" not in err[0]
+    assert not out.exists()
+
+
+def test_connecting_to_a_cluster_is_said_before_the_wait(tmp_path, capsys, monkeypatch):
+    from test_study_folders import sweep_file
+    monkeypatch.setattr(cluster_module, "CONNECT_TIMEOUT", 1)
+    out = tmp_path / "out"
+    assert sweep_module.main([str(sweep_file(tmp_path)), "--out", str(out), "--cluster",
+                              NOBODY]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    connecting = [k for k, line in enumerate(err)
+                  if line.startswith(f"connecting to the cluster at {NOBODY}")]
+    assert connecting and connecting[0] < len(err) - 1, err
+    assert err[-1].startswith(f"--cluster {NOBODY}: no Dask scheduler answers"), err
+    assert not out.exists()
+
+
+def test_the_connection_timeout_is_short():
+    assert 3 <= cluster_module.CONNECT_TIMEOUT <= 10
+
+
+# ------------------ 3. calibrate refused at its first round's set-up leaves nothing
+
+CALIBRATE_REFUSED = [str(HOURGLASS), "--target", "3", "--lo", "0.2", "--hi", "0.6",
+                     "--realizations", "99999999999", "--quiet"]
+
+
+def test_calibrate_refused_at_the_first_round_leaves_nothing(tmp_path, capsys):
+    out = tmp_path / "c"
+    assert calibrate.main(CALIBRATE_REFUSED + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "calibration stopped" in err and "run.realizations" in err, err
+    assert not out.exists()
+
+
+def test_calibrate_refused_at_the_first_round_keeps_what_the_folder_held(tmp_path, capsys):
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine\n")
+    assert calibrate.main(CALIBRATE_REFUSED + ["--out", str(out)]) == 2
+    assert "calibration stopped" in capsys.readouterr().err
+    assert sorted(os.listdir(out)) == ["notes.txt"]
+    assert (out / "notes.txt").read_text() == "mine\n"

@@ -546,16 +546,17 @@ def main(argv=None, prog: str = "python -m taichi_hsdem calibrate") -> int:
 
     sets = list(args.set)
     realizations, rounds = args.realizations, args.rounds
+    tell = None if args.quiet else lambda m: print(m, file=sys.stderr, flush=True)
     try:
         scene = load_scene(args.scene, sets)
         if args.quick:
             realizations, rounds = min(realizations, QUICK_REALIZATIONS), QUICK_ROUNDS
         for value in (args.lo, args.hi):   # the parameter and both ends, checked now
             load_scene(args.scene, sets + [f"{args.param}={value!r}"])
-        pool = Cluster(args.cluster)
+        pool = Cluster(args.cluster, say=tell)
         evaluate = simulation_evaluator(
             args.scene, args.param, realizations, sets, seed=args.seed, pool=pool,
-            progress=None if args.quiet else lambda m: print(m, file=sys.stderr, flush=True))
+            progress=tell)
     except (SceneError, ClusterError) as exc:
         for line in getattr(exc, "problems", [str(exc)]):
             print(line, file=sys.stderr)
@@ -563,32 +564,40 @@ def main(argv=None, prog: str = "python -m taichi_hsdem calibrate") -> int:
     out = Path(args.out) if args.out else Path("runs") / f"calibrate_{scene.name}"
     from .folder import StudyFolder, StudyFolderError
     try:
-        with StudyFolder(out, "calibrate", legacy=_legacy_files) as folder:
+        # the cluster first: one it cannot use is refused before the folder is made
+        with pool, StudyFolder(out, "calibrate", legacy=_legacy_files) as folder:
             folder.refuse_foreign(CALIBRATION_FILES, "the calibration")
-            folder.claim(CALIBRATION_FILES)
-            return _calibrate_into(out, args, sets, realizations, rounds, evaluate, pool)
+            return _calibrate_into(out, args, sets, realizations, rounds, evaluate, folder)
+    except ClusterError as exc:
+        print(exc, file=sys.stderr)
+        return EXIT_INVALID
     except StudyFolderError as exc:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID
 
 
-def _calibrate_into(out: Path, args, sets, realizations, rounds, evaluate, pool) -> int:
-    """:func:`main`'s calibration, in its checked and locked folder ``out``."""
+def _calibrate_into(out: Path, args, sets, realizations, rounds, evaluate, folder) -> int:
+    """:func:`main`'s calibration, in its checked and locked folder ``out``
+    (``folder``: its :class:`~.folder.StudyFolder`). Its files are claimed and
+    ``calibration.csv`` begun when the first round has finished: a calibration
+    stopped before (its scene refused at the first round's set-up) leaves the
+    folder as it found it."""
     from ..runner import RunFailed
-    from .cluster import ClusterError
     table = out / "calibration.csv"
 
     def say(message):
         if not args.quiet:
             print(message, file=sys.stderr, flush=True)
 
-    with table.open("w", newline="") as fh:
-        csv.writer(fh, lineterminator="\n").writerow(CSV_COLUMNS)
     rounds_done = []
 
     def evaluate_and_record(value):
         escapees, clogged, info = evaluate(value)
+        if not rounds_done:
+            folder.claim(CALIBRATION_FILES)
+            with table.open("w", newline="") as fh:
+                csv.writer(fh, lineterminator="\n").writerow(CSV_COLUMNS)
         rounds_done.append(value)
         row = [len(rounds_done), repr(float(value)), info["seed"],
                len(escapees) + info["n_unstable"], info["n_unstable"], sum(clogged),
@@ -607,12 +616,8 @@ def _calibrate_into(out: Path, args, sets, realizations, rounds, evaluate, pool)
         f"<s> = {args.target:g}, {rounds} round(s) of {realizations} realization(s) "
         f"-> {out}")
     try:
-        with pool:
-            cal = calibrate(evaluate_and_record, args.target, args.lo, args.hi,
-                            rounds=rounds, xtol=args.xtol, confidence=args.confidence, log=say)
-    except ClusterError as exc:
-        print(exc, file=sys.stderr)
-        return EXIT_INVALID
+        cal = calibrate(evaluate_and_record, args.target, args.lo, args.hi,
+                        rounds=rounds, xtol=args.xtol, confidence=args.confidence, log=say)
     except CalibrationError as exc:
         print(f"calibration stopped: {exc}", file=sys.stderr)
         return EXIT_FAILED

@@ -22,6 +22,8 @@ from ..limits import usable_cpus
 from ..limits import THREADS_ENV
 
 INSTALL_HINT = 'pip install "taichi_hsdem[cluster]"'
+#: Seconds to wait for a scheduler's answer before --cluster ADDRESS is refused.
+CONNECT_TIMEOUT = 8
 
 
 class ClusterError(ValueError):
@@ -45,10 +47,17 @@ def parse(spec: str | None):
 
 class Cluster:
     """A Dask client for ``parse(spec)``; ``with Cluster(spec) as c: c.run(...)``.
-    With ``spec`` None everything runs here, in order."""
+    With ``spec`` None everything runs here, in order.
 
-    def __init__(self, spec: str | None):
+    A study enters it before it makes its output folder, so that a --cluster it
+    cannot use (Dask missing, no scheduler answering within
+    :data:`CONNECT_TIMEOUT` seconds) is refused with nothing written; ``say``
+    (optional) is told before the wait."""
+
+    def __init__(self, spec: str | None, say: Callable[[str], None] | None = None):
         self.kind = parse(spec)
+        self.spec = spec
+        self.say = say or (lambda message: None)
         self.client = None
         self._local = None
         self._scratch = None
@@ -59,12 +68,14 @@ class Cluster:
         try:
             from distributed import Client, LocalCluster
         except ImportError:
-            raise ClusterError(f"--cluster needs Dask: {INSTALL_HINT}") from None
+            raise ClusterError(f"--cluster {self.spec}: needs Dask (distributed), which is "
+                               f"not installed: {INSTALL_HINT}") from None
         if self.kind[0] == "local":
             n = self.kind[1]
             threads = max(1, usable_cpus() // n)
             env = {THREADS_ENV: str(threads), "OMP_NUM_THREADS": "1",
                    "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+            self.say(f"starting a local cluster of {n} worker(s)")
             # workers keep their scratch files out of the user's folder
             self._scratch = tempfile.TemporaryDirectory(prefix="taichi_hsdem_dask_")
             self._local = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
@@ -73,11 +84,16 @@ class Cluster:
                                        silence_logs=40)
             self.client = Client(self._local)
         else:
+            address = self.kind[1]
+            self.say(f"connecting to the cluster at {address} (waiting up to "
+                     f"{CONNECT_TIMEOUT} s)")
             try:
-                self.client = Client(self.kind[1], timeout=30)
-            except (OSError, ValueError) as exc:
-                raise ClusterError(f"--cluster {self.kind[1]}: no Dask scheduler answers "
-                                   f"({exc})") from None
+                self.client = Client(address, timeout=CONNECT_TIMEOUT)
+            except (OSError, ValueError, TypeError, AssertionError) as exc:
+                # Dask's own errors for an address it cannot use or reach
+                why = " ".join(str(exc).split()) or type(exc).__name__
+                raise ClusterError(f"--cluster {address}: no Dask scheduler answers "
+                                   f"({why})") from None
         return self
 
     def __exit__(self, *exc):

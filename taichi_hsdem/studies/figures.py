@@ -363,14 +363,16 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
                               f"{path.name}: give distinct values")
         owner[path.name] = p.label
     names = [f.relative_to(out).as_posix() for f in kept_files] + figure_files(command)
-    with StudyFolder(out, f"figures {command}", legacy=_legacy_files(command)) as folder:
+    say = log or (lambda msg: None)
+    # the cluster first: one it cannot use is refused before the folder is made
+    with Cluster(cluster, say=say) as pool, \
+            StudyFolder(out, f"figures {command}", legacy=_legacy_files(command)) as folder:
         problem = point_folder_problem(out / "points")
         if problem:
             raise StudyFolderError(problem.replace("a point's folder", "the points' folder"))
         folder.refuse_foreign(names, "the figure")
         folder.claim(names)
         code_digest()                  # this process's code, before any point runs
-        say = log or (lambda msg: None)
         say(f"{command}: {len(points)} point(s) x {realizations} realization(s), t_end = "
             f"{base.run.t_end:g} s{' (quick)' if quick else ''} -> {out}")
         t0 = time.perf_counter()
@@ -399,9 +401,8 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
 
         if todo:
             say(f"running {len(todo)} point(s)" + (f" on the cluster {cluster}" if cluster else ""))
-        with Cluster(cluster) as pool:
-            pool.run(run_point, [(points[k], int(realizations), batch, say if not cluster else None)
-                                 for k in todo], finished)
+        pool.run(run_point, [(points[k], int(realizations), batch, say if not cluster else None)
+                             for k in todo], finished)
         for k, run in enumerate(runs):
             if k not in todo:
                 print(summary_line(command, run, _point_row(command, run)), flush=True)

@@ -266,6 +266,9 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
         ``out_dir`` cannot be used (a file, a dangling link, another study writing
         it, a file of the user's with a result name, a finished point of another
         study): one line, nothing is run.
+    ClusterError
+        ``cluster`` cannot be used (Dask missing, no scheduler answering): one
+        line, before the folder is made.
     """
     base = Path(base_scene_path)
     common = dict(common or {})
@@ -277,17 +280,19 @@ def run_sweep(base_scene_path: str | Path, points: Sequence[Mapping[str, Any]],
                   for point, q in zip(points, quicks)]
     out = Path(out_dir)
     study = study or f"scene {base.resolve()}"
-    with StudyFolder(out, "sweep", legacy=_legacy_files) as folder:
+    # the cluster first: one it cannot use is refused before the folder is made
+    with Cluster(cluster, say=progress) as pool, \
+            StudyFolder(out, "sweep", legacy=_legacy_files) as folder:
         folder.refuse_foreign([SWEEP_CSV, INDEX, SWEEP_PNG], "the sweep")
         keys = [_scene_key(scene) for scene in scenes]
         _check_point_folders(out, points, keys, study, resume)
         folder.claim([SWEEP_CSV, INDEX, SWEEP_PNG])
         return _run_points(out, base, points, scenes, keys, common, study, resume, progress,
-                           cluster, quicks)
+                           pool, quicks)
 
 
 def _run_points(out, base, points, scenes, keys, common, study, resume, progress,
-                cluster, quicks) -> list[dict]:
+                pool, quicks) -> list[dict]:
     """:func:`run_sweep`'s work, in its checked and locked folder ``out``."""
     code_digest()                  # this process's code, before any point runs
     say = progress or (lambda message: None)
@@ -302,14 +307,14 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
             rows[k] = _row(folder, point, "skipped", done)
             continue
         task = [scene, point, common, str(base), str(out / folder), key, study, quicks[k]]
-        if cluster is None and progress is not None:
+        if pool.kind is None and progress is not None:
             task.append(PointProgress(say, f"[{k + 1}/{total}] {folder}"))
         tasks.append(tuple(task))
         where_of.append(k)
     clock = Eta(len(tasks))
     if tasks:
-        say(f"running {len(tasks)} point(s)" + ("" if cluster is None else
-                                                f" on the cluster {cluster}"))
+        say(f"running {len(tasks)} point(s)" + ("" if pool.kind is None else
+                                                f" on the cluster {pool.spec}"))
 
     def finished(i, answer):
         k = where_of[i]
@@ -325,8 +330,7 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
         say(f"{head}: done in {summary['wall_time_s']:.1f} s, {point_text(rows[k])}"
             + (f"; {message}" if message else "") + left)
 
-    with Cluster(cluster) as pool:
-        pool.run(run_point, tasks, finished)
+    pool.run(run_point, tasks, finished)
     _write_index(out, base, common, {row["folder"]: row["overrides"] for row in rows},
                  {point_folder(p): q for p, q in zip(points, quicks) if q})
     _write_table(rows, out)
