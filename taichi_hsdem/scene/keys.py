@@ -121,8 +121,8 @@ class RunConfig(Config):
     precision: str = keyfield("choice", "floating point type of the kernels", "f64",
                              choices=("f64", "f32"))
     stepping: str = keyfield("choice", '"fused": many DEM steps per kernel launch, one '
-                            'realization per thread (disks only); "per_step": three launches '
-                            'per step, bodies in parallel; "auto": fused for disks on the CPU',
+                            'realization per thread (CPU only); "per_step": three launches '
+                            'per step, bodies in parallel; "auto": fused on the CPU',
                             AUTO, choices=("auto", "fused", "per_step"))
     stop_at_clog: bool = keyfield("bool", "stop a realization once it has clogged", True)
     force_dt: bool = keyfield("bool", "accept a dt above the critical step (stability "
