@@ -137,3 +137,18 @@ def test_calibrate_refused_at_the_first_round_keeps_what_the_folder_held(tmp_pat
     assert "calibration stopped" in capsys.readouterr().err
     assert sorted(os.listdir(out)) == ["notes.txt"]
     assert (out / "notes.txt").read_text() == "mine\n"
+
+
+# ------------------------------------------ 4. a bad grid value is said once, not per point
+
+def test_a_bad_grid_value_is_said_once_naming_its_key_and_value(tmp_path, capsys):
+    path = tmp_path / "g.toml"
+    path.write_text(f'scene = "{HOURGLASS.as_posix()}"\n[common]\n"run.t_end" = 0.05\n'
+                    '[grid]\n"particles.friction" = [0.2, -1, 0.3, 0.4]\n'
+                    '"run.seed" = [1, 2, 3, 4, 5]\n"damping.xi" = [0.1, 0.2, 0.3]\n')
+    out = tmp_path / "out"
+    assert sweep_module.main([str(path), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "particles.friction = -1" in err[0] and "at 15 points" in err[0], err
+    assert not out.exists()

@@ -251,8 +251,65 @@ def load_sweep(path: str | Path) -> Sweep:
                  description=description)
 
 
+#: A sweep's refusal lists at most this many problems of single points (the
+#: rest counted in one more line); a value refused wherever it stands is said once.
+MAX_POINT_PROBLEMS = 10
+
+
+def _value_problems(scene_path, points, common, shared) -> dict:
+    """``{(key, value text): [problem lines]}`` of each distinct value of the
+    points checked once, alone over the base scene and ``common`` (a value
+    refused there is refused at a point holding it only if the point's own check
+    says so too: another key of the point may be what makes it valid)."""
+    seen, out = set(), {}
+    for point in points:
+        if not isinstance(point, Mapping):
+            continue
+        for key, value in point.items():
+            try:
+                pair = (key, _value_text(value))
+            except TypeError:
+                continue
+            if pair in seen or not isinstance(key, str):
+                continue
+            seen.add(pair)
+            try:
+                load_scene(scene_path, _override_strings({**common, key: value}))
+            except SceneError as error:
+                out[pair] = [line for line in error.problems if line not in shared]
+            except TypeError:
+                pass
+    return out
+
+
+def _value_lines(label, bad: dict) -> list[str]:
+    """One line per refused value (``bad``: ``{(key, value text): [(point, line)]}``),
+    or, for a key with more than three refused values, one line naming them all."""
+    by_key: dict[str, list] = {}
+    for (key, text), hits in bad.items():
+        by_key.setdefault(key, []).append((text, hits))
+    out = []
+    for key, values in by_key.items():
+        lines = []
+        for text, hits in values:
+            points = sorted({k for k, _ in hits})
+            problems = list(dict.fromkeys(line for _, line in hits))
+            more = f" (and {len(problems) - 1} more problems)" if len(problems) > 1 else ""
+            at = f"at point {points[0]}" if len(points) == 1 else f"at {len(points)} points"
+            lines.append(f"{label}: {key} = {text} ({at}): {problems[0]}{more}")
+        if len(values) > 3:
+            names = ", ".join(text for text, _ in values[:8]) + (
+                ", ..." if len(values) > 8 else "")
+            lines = [f"{label}: {key}: {len(values)} of its values are refused ({names}); "
+                     f"the first: {lines[0].split(': ', 1)[1]}"]
+        out += lines
+    return out
+
+
 def _check_points(scene_path, points, common, label) -> list[Scene]:
-    """Load every point's scene; raise one SweepError listing every problem."""
+    """Load every point's scene; raise one SweepError listing every problem: a
+    value refused at every point holding it once, naming its key and value (not
+    once per point: a bad value of a grid's list stands in many points)."""
     problems: list[str] = []
     scenes = []
     folders: dict[str, int] = {}
@@ -263,24 +320,40 @@ def _check_points(scene_path, points, common, label) -> list[Scene]:
         except SceneError as error:
             shared = set(error.problems)
             problems += [f"{label}: common: {line}" for line in error.problems]
+    alone = _value_problems(scene_path, points, common, shared)
+    bad: dict = {}             # (key, value text) -> [(point, line)]
+    single: list[str] = []     # the problems of single points
     for k, point in enumerate(points):
         if not isinstance(point, Mapping) or not all(isinstance(key, str) for key in point):
-            problems.append(f"{label}: point {k}: expected a dict of dotted keys to "
-                            f"values, got {point!r}")
+            single.append(f"{label}: point {k}: expected a dict of dotted keys to "
+                          f"values, got {point!r}")
             continue
         where = f"{label}: point {k} ({_describe_point(point)})"
         folder = point_folder(point)
         if folder in folders:
-            problems.append(f"{where}: repeats point {folders[folder]}")
+            single.append(f"{where}: repeats point {folders[folder]}")
             continue
         folders[folder] = k
         try:
             scenes.append(load_scene(scene_path, _override_strings({**common, **point})))
         except SceneError as error:
-            problems += [f"{where}: {line}" for line in error.problems
-                         if line not in shared]
+            for line in error.problems:
+                if line in shared:
+                    continue
+                pair = next((pair for pair in ((key, _value_text(v))
+                                               for key, v in point.items())
+                             if line in alone.get(pair, ())), None)
+                if pair is None:
+                    single.append(f"{where}: {line}")
+                else:
+                    bad.setdefault(pair, []).append((k, line))
         except TypeError as error:  # a value TOML cannot spell
-            problems.append(f"{where}: {error}")
+            single.append(f"{where}: {error}")
+    problems += _value_lines(label, bad)
+    if len(single) > MAX_POINT_PROBLEMS:
+        single = single[:MAX_POINT_PROBLEMS] + [
+            f"{label}: and {len(single) - MAX_POINT_PROBLEMS} more problems of single points"]
+    problems += single
     backends = {(s.run.arch, s.run.precision) for s in scenes}
     if len(backends) > 1:
         problems.append(f"{label}: run.arch and run.precision must be the same at every "
