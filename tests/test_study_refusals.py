@@ -152,3 +152,14 @@ def test_a_bad_grid_value_is_said_once_naming_its_key_and_value(tmp_path, capsys
     assert len(err) == 1, err
     assert "particles.friction = -1" in err[0] and "at 15 points" in err[0], err
     assert not out.exists()
+
+
+# ------------------------------------- 5. figures --quiet still says why points failed
+
+def test_figures_quiet_says_why_every_point_was_refused(tmp_path, capsys):
+    out = tmp_path / "f"
+    code = figures.main(["friction", "--quick", "--realizations", "99999999999", "--out",
+                         str(out), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and err and len(err) <= 3, err
+    assert "run.realizations" in err[0], err

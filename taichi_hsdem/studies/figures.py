@@ -556,7 +556,11 @@ def main(argv=None, prog: str = "python -m taichi_hsdem figures") -> int:
         for line in getattr(exc, "problems", [str(exc)]):
             print(line, file=sys.stderr)
         return 2
-    return 1 if any(r.error for r in res["runs"]) else 0
+    errors = [r.error for r in res["runs"] if r.error]
+    if args.quiet:      # --quiet silences progress, not the points' failures
+        for line in dict.fromkeys(errors):
+            print(line, file=sys.stderr)
+    return 1 if errors else 0
 
 
 if __name__ == "__main__":  # pragma: no cover
