@@ -371,27 +371,6 @@ class StudyCases:
 # Failures found by this fuzzer whose fix lies in code being changed elsewhere:
 # counted and shown apart ("known"), not as failures. Remove an entry once fixed.
 KNOWN = {
-    "arches: a damaged point file of a figure folder (rows or finals lacking keys or "
-    "of the wrong type) raises from studies/arches.py instead of one line":
-        lambda f: f["family"] == "arches" and "studies/arches.py" in f["problem"],
-    "sweep/figures/calibrate: a bad or unreachable --cluster is refused only after the "
-    "study folder and its manifest (calibrate: and calibration.csv) were made":
-        lambda f: (f["family"] in ("sweep", "figures", "calibrate") and f["code"] == 2
-                   and f["problem"].startswith("refused (exit 2) but wrote")
-                   and "--cluster" in f["stderr"]),
-    "calibrate: a scene refused at the first round's set-up (exit 2) leaves the "
-    "folder, its manifest and calibration.csv":
-        lambda f: (f["family"] == "calibrate" and f["code"] == 2
-                   and f["problem"].startswith("refused (exit 2) but wrote")
-                   and "calibration stopped" in f["stderr"]),
-    "sweep: a bad value in a [grid] list is said once for every point holding it (a "
-    "line each: 8000 lines for a 20 x 20 x 20 grid) rather than once":
-        lambda f: (f["family"] == "sweep" and f["problem"].endswith("lines on stderr")
-                   and ": point " in f["stderr"]),
-    "figures --quiet: every point refused at set-up (--realizations 99999999999) exits 1 "
-    "with nothing on stderr (the points' FAILED lines are progress, silenced)":
-        lambda f: (f["family"] == "figures" and f["code"] == 1 and "--quiet" in f["args"]
-                   and f["problem"] == "exit 1 without a message"),
 }
 
 

@@ -75,13 +75,12 @@ Default: :data:`DEFAULT_REALIZATIONS` realizations per point and the scene's
 ``--quick`` is a smoke test of the whole chain: 2-3 realizations a point, a clog
 window of 0.15 s, the upstream channel shrunk to :data:`QUICK_BOX` bounding
 diameters square (the count-based scenes scaled to the same areal fraction) so
-that particles reach the constriction soon. The disk figures run to
-:data:`~.points.QUICK_T_END` (3 s, stopping at a clog): they clog as the full
-figure does, with wide intervals (``friction --quick``: 9 of 9 clogged, 18 s on
-2 cores). The level-set figures (``shapes``, ``polygons``) run 0.3 s on a fluid
-cell of ``d_b / 5``, before their first clogs (``polygons --quick --set
-run.t_end=2``: 126 s for the triangles' point on 2 cores, one of its two
-realizations clogged): they check the chain, their ``<s>`` are lower bounds. Its numbers are not the paper's statistics. ``--set`` overrides
+that particles reach the constriction soon, each run to
+:data:`~.points.QUICK_T_END` (3 s, stopping at a clog; the level-set figures on a
+fluid cell of ``d_b / 5``): they clog as the full figure does, with wide
+intervals (``friction --quick``: 9 of 9 clogged, 18 s on 2 cores; ``polygons
+--quick``: 5 of 8 clogged, 41 s; ``shapes --quick``: the circles' 4 of 4, the
+squares' lower bounds, 33 s). Its numbers are not the paper's statistics. ``--set`` overrides
 (applied after the command's and ``--quick``'s own, before the point's varied
 value) change anything else.
 
