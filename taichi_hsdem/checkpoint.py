@@ -26,7 +26,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
-import math
 import os
 import struct
 import zipfile
@@ -39,6 +38,7 @@ from . import backend
 from .digest import code_digest
 from .runstate import ARRAY_FIELDS, ArchRecord, RealizationResult, RunState
 from .scene import SceneError, load_scene, scene_to_toml
+from .scene.coerce import is_finite_real, is_int
 from .scene.toml import parse_toml, tomllib
 
 FILE = "checkpoint.npz"
@@ -195,14 +195,6 @@ def _reason(exc: BaseException) -> str:
     return text or type(exc).__name__
 
 
-def _is_int(v) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_real(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
 def _check_host(host, path) -> None:
     """Every field of the header's ``host`` record: its type and range (``t`` finite
     and >= 0, counters non-negative integers, one entry per realization)."""
@@ -212,17 +204,17 @@ def _check_host(host, path) -> None:
     if not isinstance(host, dict):
         raise CheckpointError(f"{path}: header.host: missing or not a table")
     t = host.get("t")
-    if not _is_real(t) or t < 0:
+    if not is_finite_real(t) or t < 0:
         bad("t", f"must be a finite time >= 0, got {t!r}")
     for key in ("steps", "history_overflows", "launches", "neighbor_builds"):
-        if not _is_int(host.get(key)) or host[key] < 0:
+        if not is_int(host.get(key)) or host[key] < 0:
             bad(key, f"must be an integer >= 0, got {host.get(key)!r}")
-    if not _is_real(host.get("next_series")) or host["next_series"] < 0:
+    if not is_finite_real(host.get("next_series")) or host["next_series"] < 0:
         bad("next_series", f"must be a finite time >= 0, got {host.get('next_series')!r}")
     if not isinstance(host.get("any_running"), bool):
         bad("any_running", f"must be true or false, got {host.get('any_running')!r}")
     seeds = host.get("seeds")
-    if not isinstance(seeds, list) or not seeds or not all(_is_int(s) for s in seeds):
+    if not isinstance(seeds, list) or not seeds or not all(is_int(s) for s in seeds):
         bad("seeds", "must be a non-empty list of integers")
     R = len(seeds)
     for key in ("rngs", "results"):
@@ -237,8 +229,8 @@ def _check_host(host, path) -> None:
     for k, res in enumerate(host["results"]):
         if set(res) != set(RESULT_KEYS):
             bad(f"results[{k}]", f"must have exactly the keys {sorted(RESULT_KEYS)}")
-        kinds = {"seed": _is_int, "escapees": _is_int, "clogged": lambda v: isinstance(v, bool),
-                 "t_clog": _is_real, "t_stop": _is_real,
+        kinds = {"seed": is_int, "escapees": is_int, "clogged": lambda v: isinstance(v, bool),
+                 "t_clog": is_finite_real, "t_stop": is_finite_real,
                  "status": lambda v: v in RESULT_STATUSES,
                  "reason": lambda v: isinstance(v, str)}
         for key, check in kinds.items():
@@ -252,22 +244,22 @@ def _check_host(host, path) -> None:
             bad(f"results[{k}]", "a count below 0 or a time outside [0, host.t]")
     series = host.get("series")
     if not isinstance(series, list) or not all(
-            isinstance(row, list) and len(row) == 3 and _is_int(row[0]) and 0 <= row[0] < R
-            and _is_real(row[1]) and 0 <= row[1] <= t and _is_int(row[2]) and row[2] >= 0
+            isinstance(row, list) and len(row) == 3 and is_int(row[0]) and 0 <= row[0] < R
+            and is_finite_real(row[1]) and 0 <= row[1] <= t and is_int(row[2]) and row[2] >= 0
             for row in series):
         bad("series", "must be rows [realization, t, escapees] with t in [0, host.t]")
     flow = host.get("flow")
     if not isinstance(flow, list) or not all(
-            isinstance(row, list) and len(row) == 4 and _is_int(row[0]) and 0 <= row[0] < R
-            and _is_real(row[1]) and 0 <= row[1] <= t
+            isinstance(row, list) and len(row) == 4 and is_int(row[0]) and 0 <= row[0] < R
+            and is_finite_real(row[1]) and 0 <= row[1] <= t
             and all(isinstance(v, float) for v in row[2:]) for row in flow):
         bad("flow", "must be rows [realization, t, pressure drop, flow rate] with t in "
                     "[0, host.t]")
     network = host.get("network")
     if not isinstance(network, list) or not all(
-            isinstance(row, list) and len(row) == 4 and _is_int(row[0]) and 0 <= row[0] < R
-            and _is_real(row[1]) and 0 <= row[1] <= t
-            and all(_is_int(v) and v >= 0 for v in row[2:]) for row in network):
+            isinstance(row, list) and len(row) == 4 and is_int(row[0]) and 0 <= row[0] < R
+            and is_finite_real(row[1]) and 0 <= row[1] <= t
+            and all(is_int(v) and v >= 0 for v in row[2:]) for row in network):
         bad("network", "must be rows [realization, t, injected, throats clogged] with t "
                        "in [0, host.t]")
     arches = host.get("arches")
@@ -280,18 +272,18 @@ def _check_host(host, path) -> None:
                                 "their positions and angles, times in [0, host.t])")
     caps = host.get("neighbor_caps")
     if not isinstance(caps, list) or len(caps) != 2 or not all(
-            _is_int(c) and c >= 1 for c in caps):
+            is_int(c) and c >= 1 for c in caps):
         bad("neighbor_caps", f"must be two integers >= 1, got {caps!r}")
     for key in ("e0", "u_ref"):
         value = host.get(key, ())
         if value is not None and not (isinstance(value, list) and len(value) == R and all(
-                _is_real(v) and v >= 0 for v in value)):
+                is_finite_real(v) and v >= 0 for v in value)):
             bad(key, f"must be null or {R} finite numbers >= 0")
     if "fluid" in host:
         fl = host["fluid"]
         if not isinstance(fl, dict) or not all(
-                _is_int(fl.get(k)) and fl[k] >= 0 for k in ("updates", "solves")) or not (
-                _is_real(fl.get("seconds")) and fl["seconds"] >= 0):
+                is_int(fl.get(k)) and fl[k] >= 0 for k in ("updates", "solves")) or not (
+                is_finite_real(fl.get("seconds")) and fl["seconds"] >= 0):
             bad("fluid", "must hold counters updates, solves >= 0 and seconds >= 0")
 
 
@@ -302,16 +294,16 @@ def _is_arch(a, R, t) -> bool:
     if not isinstance(a, dict) or set(a) != set(ARCH_KEYS):
         return False
     ids, xs, ths, broken = a["ids"], a["x"], a["theta"], a["t_broken"]
-    members = (isinstance(ids, list) and ids and all(_is_int(i) and i >= 0 for i in ids)
+    members = (isinstance(ids, list) and ids and all(is_int(i) and i >= 0 for i in ids)
                and isinstance(xs, list) and len(xs) == len(ids)
-               and all(isinstance(p, list) and len(p) == 2 and all(map(_is_real, p)) for p in xs)
-               and isinstance(ths, list) and len(ths) == len(ids) and all(map(_is_real, ths)))
+               and all(isinstance(p, list) and len(p) == 2 and all(map(is_finite_real, p)) for p in xs)
+               and isinstance(ths, list) and len(ths) == len(ids) and all(map(is_finite_real, ths)))
     held = broken is None and a["failure"] is None and a["watching"] is False
-    failed = (_is_real(broken) and _is_real(a["t_formed"]) and a["t_formed"] <= broken <= t
+    failed = (is_finite_real(broken) and is_finite_real(a["t_formed"]) and a["t_formed"] <= broken <= t
               and a["failure"] in ARCH_FAILURES and isinstance(a["watching"], bool))
-    return bool(members and _is_int(a["realization"]) and 0 <= a["realization"] < R
-                and _is_int(a["arch"]) and a["arch"] >= 0 and _is_real(a["t_formed"])
-                and 0 <= a["t_formed"] <= t and _is_real(a["x_over_d"]) and (held or failed))
+    return bool(members and is_int(a["realization"]) and 0 <= a["realization"] < R
+                and is_int(a["arch"]) and a["arch"] >= 0 and is_finite_real(a["t_formed"])
+                and 0 <= a["t_formed"] <= t and is_finite_real(a["x_over_d"]) and (held or failed))
 
 
 def check_continuable(header: dict, scene, path) -> None:

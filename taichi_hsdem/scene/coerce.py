@@ -97,8 +97,14 @@ def _is_real(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
-def _is_int(value: Any) -> bool:
+def is_int(value: Any) -> bool:
+    """An integer, not a bool (which Python counts as one)."""
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def is_finite_real(value: Any) -> bool:
+    """A finite real number, not a bool: what a file's numeric field must hold."""
+    return _is_real(value) and math.isfinite(value)
 
 
 def _expected(spec: Spec) -> str:
@@ -115,7 +121,7 @@ def _expected(spec: Spec) -> str:
 
 def _coerce_point(value: Any, key: str, out: Problems):
     if (isinstance(value, (list, tuple)) and len(value) == 2
-            and all(_is_real(c) and math.isfinite(c) for c in value)):
+            and all(is_finite_real(c) for c in value)):
         return (float(value[0]), float(value[1]))
     out.add(key, f"expected [x, y] with two finite numbers, got {describe(value)}")
     return BAD
@@ -123,7 +129,7 @@ def _coerce_point(value: Any, key: str, out: Problems):
 
 def _coerce_pose(value: Any, key: str, out: Problems):
     if (isinstance(value, (list, tuple)) and len(value) in (2, 3)
-            and all(_is_real(c) and math.isfinite(c) for c in value)):
+            and all(is_finite_real(c) for c in value)):
         return (float(value[0]), float(value[1]),
                 float(value[2]) if len(value) == 3 else 0.0)
     out.add(key, f"expected [x, y] or [x, y, theta] with finite numbers, got {describe(value)}")
@@ -165,7 +171,7 @@ def _coerce(value: Any, spec: Spec, key: str, out: Problems) -> Any:
         return AUTO
     kind = spec.kind
     if kind in ("float", "int"):
-        if not (_is_int(value) if kind == "int" else _is_real(value)):
+        if not (is_int(value) if kind == "int" else _is_real(value)):
             hint = ""
             if isinstance(value, str):
                 hint = suggest(value, [AUTO]) if spec.auto else ""
@@ -218,7 +224,7 @@ def _coerce(value: Any, spec: Spec, key: str, out: Problems) -> Any:
                              "polygons", max_len=spec.max_len)
     # interval
     if (isinstance(value, (list, tuple)) and len(value) == 2
-            and all(_is_real(c) and math.isfinite(c) for c in value)):
+            and all(is_finite_real(c) for c in value)):
         if value[0] < value[1]:
             return (float(value[0]), float(value[1]))
         out.add(key, f"expected [x0, x1] with x0 < x1, got {show(value)}")

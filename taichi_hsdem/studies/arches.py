@@ -51,6 +51,7 @@ import numpy as np
 from ..exits import Parser
 from ..geometry.shapes import outline_polygon, transform
 from ..geometry.walls import wall_segments
+from ..scene.coerce import is_finite_real, is_int
 from .arch_geometry import (ArchError, DEFAULT_ANGLE, DEFAULT_TOL, FACE_OVERLAP, Sides,  # noqa: F401
                             arch_chain, find_arch, pair_gap, pair_kind, wall_kind,
                             world_outline)
@@ -102,10 +103,6 @@ def _point_models(folder: Path):
     return out
 
 
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
 def _point_problem(data: dict, n_species: int) -> str | None:
     """What a point file's ``rows`` and ``finals`` lack that :func:`analyse_folder`
     and :func:`draw` read, or None: every row an object with its seed, escapees,
@@ -119,9 +116,8 @@ def _point_problem(data: dict, n_species: int) -> str | None:
         if not (isinstance(r, dict) and all(key in r for key in
                                             ("seed", "escapees", "clogged", "status"))):
             return f'row {k} lacks its "seed", "escapees", "clogged" or "status"'
-        if not (isinstance(r["seed"], int) and not isinstance(r["seed"], bool)
-                and isinstance(r["status"], str)
-                and (r["escapees"] is None or _is_number(r["escapees"]))):
+        if not (is_int(r["seed"]) and isinstance(r["status"], str)
+                and (r["escapees"] is None or is_finite_real(r["escapees"]))):
             return f'row {k}: its "seed", "escapees" or "status" is of the wrong type'
         if r["status"] != "ok" or not r["clogged"] or str(r["seed"]) not in finals:
             continue
@@ -133,15 +129,14 @@ def _point_problem(data: dict, n_species: int) -> str | None:
         n = len(fs["x"])
         if any(len(fs[key]) != n for key in ("theta", "alive", "species")):
             return f'{where}: "x", "theta", "alive" and "species" differ in length'
-        if not all(isinstance(xi, list) and len(xi) == 2 and all(map(_is_number, xi))
+        if not all(isinstance(xi, list) and len(xi) == 2 and all(map(is_finite_real, xi))
                    for xi in fs["x"]):
             return f'{where}: "x" is not a list of pairs of finite numbers'
-        if not all(map(_is_number, fs["theta"])):
+        if not all(map(is_finite_real, fs["theta"])):
             return f'{where}: "theta" is not a list of finite numbers'
         if not all(isinstance(a, (bool, int)) for a in fs["alive"]):
             return f'{where}: "alive" is not a list of booleans'
-        if not all(isinstance(sp, int) and not isinstance(sp, bool) and 0 <= sp < n_species
-                   for sp in fs["species"]):
+        if not all(is_int(sp) and 0 <= sp < n_species for sp in fs["species"]):
             return (f'{where}: "species" holds other than the scene\'s species indices '
                     f'(0 to {n_species - 1})')
     return None
