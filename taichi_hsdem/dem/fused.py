@@ -76,6 +76,7 @@ def _forces(bodies: ti.template(), batch: ti.template(), particles: ti.template(
     deepest = 0.0
     for i in range(bodies.x.shape[1]):
         if bodies.alive[r, i] != 0:
+            # declared out here: each branch of a static if is a scope of its own
             ftot, mtot, d = ti.Vector([0.0, 0.0]), 0.0, 0.0
             if ti.static(law == DISKS):
                 ftot, mtot, d = disk_force(bodies, particles, materials, walls, neighbors,
