@@ -24,9 +24,9 @@ F_REBUILD = 2           # some body moved half the Verlet skin: rebuild the list
 F_NBR_OVERFLOW = 3      # a body had more neighbours than the list's capacity
 N_FLAGS = 4
 
-# Columns of the contact-law tables.
-PAIR_KN, PAIR_KS, PAIR_MU, PAIR_CE = 0, 1, 2, 3
-N_PAIR = 4
+# Columns of the contact-law tables (PAIR_MUR: rolling friction, disks only).
+PAIR_KN, PAIR_KS, PAIR_MU, PAIR_CE, PAIR_MUR = 0, 1, 2, 3, 4
+N_PAIR = 5
 
 # Columns of a grid's geometry; the neighbour grid's holds the Verlet skin too.
 GEO_OX, GEO_OY, GEO_H = 0, 1, 2

@@ -25,39 +25,64 @@ LOWER = (6.1, (-1 / SQ2, 1 / SQ2))      # x - y = 6.1
 RADIUS = 0.5
 
 
-def arch_statics(centres, loads, contacts, mu, radius=RADIUS, cost=None):
+def arch_statics(centres, loads, contacts, mu, radius=RADIUS, cost=None, mu_r=0.0):
     """The linear program of a disk arch's statics.
 
     ``contacts``: ``(i, j)`` disk on disk, or ``(i, n)`` disk ``i`` on a wall
     whose unit normal ``n`` points into the channel. Unknowns per contact: the
     normal force ``N >= 0`` and the tangential force ``T``, ``|T| <= mu N``;
-    each disk's force and moment balance with its load ``(fx, fy)``. Returns
-    scipy's result (``status`` 0: admissible, 2: no balance), ``x`` the
-    ``(N, T)`` of each contact in turn, minimising ``cost . x``."""
+    with rolling friction ``mu_r`` a third, the rolling moment ``M`` (a couple,
+    ``+M`` on ``i``, ``-M`` on ``j``), ``|M| <= mu_r r_eff N`` (``r_eff = r / 2``
+    between equal disks, ``r`` on a wall); each disk's force and moment balance
+    with its load ``(fx, fy)``. Returns scipy's result (``status`` 0:
+    admissible, 2: no balance), ``x`` the ``(N, T)`` (or ``(N, T, M)``) of each
+    contact in turn, minimising ``cost . x``."""
     centres = np.asarray(centres, float)
     nc = len(contacts)
-    A = np.zeros((3 * len(centres), 2 * nc))
+    w = 3 if mu_r > 0 else 2                   # unknowns per contact
+    A = np.zeros((3 * len(centres), w * nc))
+    cone = np.zeros((2 * (w - 1) * nc, w * nc))
     for c, (i, other) in enumerate(contacts):
         if isinstance(other, int):
             n = centres[other] - centres[i]
             n /= np.linalg.norm(n)
             sides = [(i, -n), (other, n)]          # each pushed away from the other
+            r_eff = radius / 2
         else:
             sides = [(i, np.asarray(other, float))]
-        for k, push in sides:
+            r_eff = radius
+        for side, (k, push) in enumerate(sides):
             t = np.array([-push[1], push[0]])
             arm = -radius * push                   # centre to contact point
-            A[3 * k:3 * k + 2, 2 * c] += push
-            A[3 * k:3 * k + 2, 2 * c + 1] += t
-            A[3 * k + 2, 2 * c + 1] += arm[0] * t[1] - arm[1] * t[0]
+            A[3 * k:3 * k + 2, w * c] += push
+            A[3 * k:3 * k + 2, w * c + 1] += t
+            A[3 * k + 2, w * c + 1] += arm[0] * t[1] - arm[1] * t[0]
+            if w == 3:
+                A[3 * k + 2, w * c + 2] += 1.0 if side == 0 else -1.0
+        rows = 2 * (w - 1) * c
+        cone[rows, [w * c, w * c + 1]] = [-mu, 1.0]
+        cone[rows + 1, [w * c, w * c + 1]] = [-mu, -1.0]
+        if w == 3:
+            cone[rows + 2, [w * c, w * c + 2]] = [-mu_r * r_eff, 1.0]
+            cone[rows + 3, [w * c, w * c + 2]] = [-mu_r * r_eff, -1.0]
     b = -np.concatenate([[fx, fy, 0.0] for fx, fy in loads])
-    cone = np.zeros((2 * nc, 2 * nc))
-    for c in range(nc):
-        cone[2 * c, [2 * c, 2 * c + 1]] = [-mu, 1.0]
-        cone[2 * c + 1, [2 * c, 2 * c + 1]] = [-mu, -1.0]
-    bounds = [(0, None) if q % 2 == 0 else (None, None) for q in range(2 * nc)]
-    return linprog(np.zeros(2 * nc) if cost is None else cost, A_ub=cone,
-                   b_ub=np.zeros(2 * nc), A_eq=A, b_eq=b, bounds=bounds, method="highs")
+    bounds = [(0, None) if q % w == 0 else (None, None) for q in range(w * nc)]
+    return linprog(np.zeros(w * nc) if cost is None else cost, A_ub=cone,
+                   b_ub=np.zeros(len(cone)), A_eq=A, b_eq=b, bounds=bounds, method="highs")
+
+
+def rolling_needed(centres, loads, contacts, mu, lo=0.0, hi=2.0):
+    """The least rolling friction at which the arch has a balance (bisection on
+    the linear program's feasibility, to 1e-6)."""
+    if arch_statics(centres, loads, contacts, mu).status == 0:
+        return 0.0
+    while hi - lo > 1e-6:
+        mid = 0.5 * (lo + hi)
+        if arch_statics(centres, loads, contacts, mu, mu_r=mid).status == 0:
+            hi = mid
+        else:
+            lo = mid
+    return hi
 
 
 def three_disk_arch(beta_deg, shift=0.0):
@@ -136,17 +161,20 @@ def test_asymmetric_three_disk_arch_has_no_balance_at_any_friction():
     assert arch_statics(x, [(1.0, 0.0)] * 3, arch_contacts(x), mu=10.0).status == 2
 
 
-def _arch_run(friction, spin_drag, seconds=4.0, kn=1.0e4, load=2.0, tilt=0.0):
+def _arch_run(friction, spin_drag, seconds=4.0, kn=1.0e4, load=2.0, tilt=0.0, shift=0.0,
+              rolling=0.0):
     """FUNNEL22 with three unit disks placed 0.01 upstream of the beta = 20
-    arch (the middle one ``tilt`` off the centre line), loads along x, no fluid."""
-    disk = {"shape": "circle", "diameter": 1.0, "count": 3, "spin_drag": spin_drag}
+    arch (displaced by ``shift``; then the middle one ``tilt`` off), loads
+    along x, no fluid."""
+    disk = {"shape": "circle", "diameter": 1.0, "count": 3, "spin_drag": spin_drag,
+            "rolling_friction": rolling}
     scene = arena_scene([disk], kn=kn, friction=friction, restitution=0.5, xi=5.0,
                         dt_safety=0.1)
     scene["geometry"].update(outline=FUNNEL22, obstacles=[], constriction_x=9.9,
                              escape_offset=0.05)
     scene["feed"]["region"] = [1.0, 9.0]
     sim = make_sim(scene)
-    start = three_disk_arch(20.0) - [0.01, 0.0]
+    start = three_disk_arch(20.0, shift) - [0.01, 0.0]
     start[0, 1] += tilt
     sim.set_state([start.tolist()])
     sim.set_external_load(force=[[[load, 0.0]] * 3])
@@ -186,3 +214,46 @@ def test_arch_whose_friction_statics_rejects_leaves_its_place():
     st = sim.state()
     moved = np.where(st["alive"][0], np.linalg.norm(st["x"][0] - start, axis=1), np.inf)
     assert moved.max() > 0.1
+
+
+def test_displaced_arch_balances_with_rolling_friction_in_proportion_to_its_displacement():
+    # rolling moments at the four contacts (|M| <= mu_r r_eff N) give the
+    # displaced arch the balance that forces alone cannot: the least mu_r grows
+    # in proportion to the displacement, 0.46 per diameter at beta = 20
+    need = {}
+    for shift in (0.01, 0.02, 0.05):
+        x = three_disk_arch(20.0, shift)
+        loads, contacts = [(1.0, 0.0)] * 3, arch_contacts(x)
+        need[shift] = rolling_needed(x, loads, contacts, mu=0.25)
+        assert arch_statics(x, loads, contacts, 0.25, mu_r=1.02 * need[shift]).status == 0
+        assert arch_statics(x, loads, contacts, 0.25, mu_r=0.98 * need[shift]).status == 2
+    assert need[0.02] == pytest.approx(0.00924, rel=1e-3)
+    assert need[0.01] / 0.01 == pytest.approx(need[0.02] / 0.02, rel=0.01)
+    assert need[0.05] / 0.05 == pytest.approx(need[0.02] / 0.02, rel=0.03)
+    # the symmetric arch needs none
+    x = three_disk_arch(20.0)
+    assert rolling_needed(x, [(1.0, 0.0)] * 3, arch_contacts(x), mu=0.25) == 0.0
+
+
+@pytest.mark.parametrize("share, holds", [(2.0, True), (0.5, False)])
+def test_displaced_arch_stands_with_the_rolling_friction_statics_asks_and_not_below(
+        share, holds):
+    # the arch displaced by 0.02 d along its mechanism, no spin drag: with twice
+    # the rolling friction the linear program needs it comes to rest where it
+    # was placed; with half it goes on rolling along the mechanism, as without
+    # rolling friction (slowly: the loads drive the mechanism weakly so near the
+    # symmetric arch, and xi = 5 / s damps it; its spin grows from 0.02 to 0.03
+    # 1 / s over the next half second, without rolling friction 0.03 to 0.04)
+    x = three_disk_arch(20.0, 0.02)
+    need = rolling_needed(x, [(1.0, 0.0)] * 3, arch_contacts(x), mu=0.25)
+    sim, start = _arch_run(0.25, spin_drag=0.0, seconds=3.0, shift=0.02,
+                           rolling=share * need)
+    st = sim.state()
+    moved = np.where(st["alive"][0], np.linalg.norm(st["x"][0] - start, axis=1), np.inf)
+    assert sim.batch.bad.to_numpy()[0] == 0
+    if holds:
+        assert moved.max() < 0.02
+        assert np.abs(st["omega"][0]).max() < 1e-4
+    else:
+        assert moved.max() > 0.02
+        assert np.abs(st["omega"][0]).max() > 0.01

@@ -182,3 +182,13 @@ def test_step_is_a_deprecated_name_of_advance():
     assert old.steps == new.steps == 30 and old.t == new.t
     np.testing.assert_array_equal(old.state()["x"], new.state()["x"])
     assert old.run_state.series == new.run_state.series == []
+
+
+def test_fused_gives_the_per_step_bits_with_rolling_friction():
+    # the rolling moments ride in the shear history's second node: both paths
+    # read and write them alike
+    extra = ["particles.0.rolling_friction=0.05", "run.t_end=1.5"]
+    per = run("per_step", extra)
+    moments = per[0].history.old[1].to_numpy()[:, :, 1, :, 0]
+    assert np.abs(moments).max() > 0
+    _same(run("fused", extra), per)

@@ -65,6 +65,8 @@ def _stopped_then_resumed(path, sets, tmp_path, chunks):
     # the implicit carried volume keeps each body's motion since the last solve
     (VANI, COMMON + NEAR + ["run.t_end=0.3", "fluid.particle_flux=true"], 40),
     (SQUARES, COMMON + ["run.t_end=0.02", "particles.count=20"], 3),
+    # rolling friction keeps each contact's moment in the shear history
+    (VANI, COMMON + NEAR + ["run.t_end=0.3", "particles.rolling_friction=0.05"], 40),
 ])
 def test_resumed_run_is_the_run_never_stopped(path, sets, chunks, tmp_path):
     straight = Simulation(load_scene(path, sets)).run()

@@ -36,11 +36,18 @@ not worked out).
 
 Disks (every particle a circle) take the analytic path: one contact point per
 pair, ``delta = r_i + r_j - |x_i - x_j|``, the same law, no level-set grids.
+With rolling friction ``mu_r`` (disks only) each contact also carries a rolling
+moment: an elastic part ``M <- M - k_r dt (omega_i - omega_j)``, ``k_r = k_s
+r_eff^2``, with a dashpot ``c_e sqrt(k_r I_eff)`` while it holds, capped at
+``mu_r r_eff |F_n|`` (``r_eff = r_i r_j / (r_i + r_j)``, ``1/I_eff = 1/I_i +
+1/I_j``; ``r_i``, ``I_i`` and ``omega_j = 0`` against a wall); the elastic part is
+kept beside the shear in the history (node 1 of the disk).
 """
 
 from ..backend import on_gpu, ti  # sets the environment before Taichi loads
 from .kmath import cross, node_world, rot, rot_t, sin_cos, spin, template_sample, wall_sample
-from ..layout import BAD_PASSED, F_HISTORY_OVERFLOW, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
+from ..layout import (BAD_PASSED, F_HISTORY_OVERFLOW, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU,
+                      PAIR_MUR)
 from .neighbors import NEIGHBORS
 from .state import (CONTACT_PARTICLES, Batch, Bodies, Materials, ShearHistory, Templates,
                     WallGrid)
@@ -146,6 +153,45 @@ def store_shear(hp: ti.template(), hs: ti.template(), r, i, k, slots: ti.templat
             hs[r, i, k, s] = fs
             stored = 1
     return 1 - stored
+
+
+@ti.func
+def rolling_law(m_old, w_rel, kr, cr, cap, dt):
+    """Rolling moment of one disk contact and the elastic part to keep: the
+    elastic moment carried over, turned by the relative spin ``w_rel`` over the
+    step, with the dashpot ``cr`` while it holds; at the limit ``cap`` the
+    contact rolls and the moment is the limit (no dashpot)."""
+    m_el = m_old - kr * dt * w_rel
+    m = m_el
+    if ti.abs(m_el) >= cap:
+        if m_el != 0.0:
+            m_el *= cap / ti.abs(m_el)
+        m = m_el
+    else:
+        m = m_el - cr * w_rel
+        if ti.abs(m) > cap:
+            m *= cap / ti.abs(m)
+    return m, m_el
+
+
+@ti.func
+def find_roll(hp: ti.template(), hs: ti.template(), r, i, slots: ti.template(), partner):
+    """Disk ``i``'s rolling moment against ``partner`` from the last step (0 for a
+    new contact): in the slot of the partner's shear, node 1."""
+    m = 0.0
+    for s in ti.static(range(slots)):
+        if hp[r, i, 0, s] == partner + 1:
+            m = hs[r, i, 1, s][0]
+    return m
+
+
+@ti.func
+def store_roll(hp: ti.template(), hs: ti.template(), r, i, slots: ti.template(), partner, m):
+    """Keep the rolling moment beside the partner's shear (:func:`store_shear`
+    first; dropped with it when every slot was taken)."""
+    for s in ti.static(range(slots)):
+        if hp[r, i, 0, s] == partner + 1:
+            hs[r, i, 1, s] = vec2(m, 0.0)
 
 
 @ti.kernel
@@ -468,6 +514,19 @@ def disk_force(bodies: ti.template(), particles: ti.template(), materials: ti.te
             dropped += store_shear(hp_new, hs_new, r, i, 0, slots, j, fs)
             ftot += fn + fs
             mtot += cross(ra, fs)
+            mur = materials.pair[a, b, PAIR_MUR]
+            if mur > 0.0:
+                rj = particles.disk_radius[j]
+                reff = ri * rj / (ri + rj)
+                kr = materials.pair[a, b, PAIR_KS] * reff * reff
+                ii, ij = 0.5 * mi * ri * ri, 0.5 * mj * rj * rj
+                mr, m_el = rolling_law(find_roll(hp_old, hs_old, r, i, slots, j),
+                                       wi - bodies.omega[r, j], kr,
+                                       materials.pair[a, b, PAIR_CE]
+                                       * ti.sqrt(kr * ii * ij / (ii + ij)),
+                                       mur * reff * fn.norm(), dt)
+                store_roll(hp_new, hs_new, r, i, slots, j, m_el)
+                mtot += mr
             deepest = ti.max(deepest, depth / (2.0 * ri))
     phi, g = wall_sample(walls, xi)
     depth = ri - phi
@@ -484,6 +543,15 @@ def disk_force(bodies: ti.template(), particles: ti.template(), materials: ti.te
         dropped += store_shear(hp_new, hs_new, r, i, 0, slots, n_part, fs)
         ftot += fn + fs
         mtot += cross(ra, fs)
+        mur = materials.wall[a, PAIR_MUR]
+        if mur > 0.0:
+            kr = materials.wall[a, PAIR_KS] * ri * ri
+            mr, m_el = rolling_law(find_roll(hp_old, hs_old, r, i, slots, n_part), wi, kr,
+                                   materials.wall[a, PAIR_CE]
+                                   * ti.sqrt(kr * 0.5 * particles.mass[i] * ri * ri),
+                                   mur * ri * fn.norm(), dt)
+            store_roll(hp_new, hs_new, r, i, slots, n_part, m_el)
+            mtot += mr
         deepest = ti.max(deepest, depth / (2.0 * ri))
     if dropped != 0:   # after the loops (store_shear)
         flags[F_HISTORY_OVERFLOW] += dropped

@@ -332,8 +332,8 @@ class ShearHistory(Bundle):
 
     @classmethod
     def of(cls, model, templates: Templates, R: int, N: int) -> "ShearHistory":
-        if model.all_disks:
-            return cls(R, N, 1, DISK_HISTORY_SLOTS)
+        if model.all_disks:   # node 1 of a disk: the rolling moments (``.x``)
+            return cls(R, N, 2 if model.rolling else 1, DISK_HISTORY_SLOTS)
         return cls(R, N, int(templates.node_count.max()), LS_HISTORY_SLOTS)
 
     @property

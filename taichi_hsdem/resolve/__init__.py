@@ -204,7 +204,13 @@ def _resolve(scene: Scene, arch: str) -> Model:
                                mass=mass, inertia=inertia, d_eq=t.equivalent_diameter, kn=0.0,
                                ks=0.0, friction=sp.friction, restitution=sp.restitution,
                                xi=xi, kappa=kp, carried=carried, ls_spacing=ls,
-                               spin_drag=spin, plate=plate, creep=creep))
+                               spin_drag=spin, plate=plate, creep=creep,
+                               rolling=sp.rolling_friction))
+        if sp.rolling_friction > 0.0 and not all_disks:
+            res.bad(f"particles.{k}.rolling_friction",
+                    "rolling friction is modelled for disks only (every species a circle "
+                    "and contact.disk_fast_path = true); other shapes resist rolling by "
+                    "their corners: set it to 0")
     # "auto" depends on each species' density and permeability: record every
     # species' value, and as damping.xi their count-weighted mean (then unused).
     for k, s in enumerate(species):

@@ -178,7 +178,10 @@ def _memory_parts(scene: Scene, species: list[Species], all_disks: bool, wall_h:
                   f"the state of {R} x {n} bodies", R * n * limits.BODY_BYTES,
                   "use fewer realizations per run (sweeps and figures batch them) or "
                   "fewer particles")]
-    nodes = 1 if all_disks else max(len(s.shape.nodes) for s in species)
+    if all_disks:   # the disk's one contact point, and its rolling moment beside it
+        nodes = 2 if any(s.rolling > 0.0 for s in species) else 1
+    else:
+        nodes = max(len(s.shape.nodes) for s in species)
     slots = DISK_HISTORY_SLOTS if all_disks else LS_HISTORY_SLOTS
     parts.append(Part("particles.nodes", f"the shear history of {R} x {n} bodies x {nodes} "
                       "nodes", R * n * nodes * slots * limits.HISTORY_SLOT_BYTES,

@@ -80,6 +80,7 @@ class Species:
     spin_drag: float = 0.0  # viscous torque per unit spin beyond xi I, N m s (implicit)
     plate: float = 0.0      # plate friction limit over the mass, N/kg (0: no plate contact)
     creep: float = 0.0      # speed below which plate friction turns viscous, m/s
+    rolling: float = 0.0    # rolling friction coefficient (disks only; 0: none)
 
 
 @dataclass
@@ -111,6 +112,12 @@ class Model:
     # mean fluid speed through the constriction of the open channel (no particles)
     open_channel_speed: float | None = None
     notes: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def rolling(self) -> bool:
+        """Whether some species has rolling friction (disks only): their shear
+        history then keeps each contact's rolling moment beside its force."""
+        return any(s.rolling > 0.0 for s in self.species)
 
     @property
     def n_particles(self) -> int:

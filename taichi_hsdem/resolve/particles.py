@@ -13,7 +13,7 @@ from ..geometry import shapes as shp
 from ..geometry import walls as wl
 from .. import laws as lgs
 from ..laws import harmonic_mean, restitution_factor
-from ..layout import N_PAIR, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU
+from ..layout import N_PAIR, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU, PAIR_MUR
 from ..limits import Part
 from ..scene import Scene
 from ..scene.keys import AUTO, shape_vertex_count
@@ -90,7 +90,8 @@ def critical_time_step(species: list[Species], all_disks: bool, normalize: bool)
     """``2 / omega_max`` over every species pair and every species against a wall.
 
     ``omega^2`` is the larger of ``k_n,eff / m_eff`` (normal) and ``k_s,eff / m_t``
-    (tangential, ``1/m_t`` adding each body's ``1/m + r_b^2/I``). Without
+    (tangential, ``1/m_t`` adding each body's ``1/m + r_b^2/I``; with rolling
+    friction, plus the rolling spring's ``k_s r_eff^2 (1/I_a + 1/I_b)``). Without
     normalisation every node of the longest straight edge can be in contact at once.
     """
     if all_disks or normalize:
@@ -100,14 +101,20 @@ def critical_time_step(species: list[Species], all_disks: bool, normalize: bool)
     omega2 = 0.0
     for a in species:
         inv_ta = 1.0 / a.mass + a.shape.bounding_radius ** 2 / a.inertia
-        # against a wall
-        omega2 = max(omega2, factor * a.kn / a.mass, factor * a.ks / (1.0 / inv_ta))
+        ra = a.shape.bounding_radius
+        # against a wall (the rolling spring, k_s r^2 on the spin, adds to the shear's)
+        roll = a.ks * ra ** 2 / a.inertia if a.rolling > 0.0 else 0.0
+        omega2 = max(omega2, factor * a.kn / a.mass, factor * a.ks / (1.0 / inv_ta) + roll)
         for b in species:
             kn = harmonic_mean(a.kn, b.kn)
             ks = harmonic_mean(a.ks, b.ks)
             meff = a.mass * b.mass / (a.mass + b.mass)
             inv_t = inv_ta + 1.0 / b.mass + b.shape.bounding_radius ** 2 / b.inertia
-            omega2 = max(omega2, factor * kn / meff, factor * ks * inv_t)
+            rb = b.shape.bounding_radius
+            roll = 0.0
+            if a.rolling + b.rolling > 0.0:
+                roll = ks * (ra * rb / (ra + rb)) ** 2 * (1.0 / a.inertia + 1.0 / b.inertia)
+            omega2 = max(omega2, factor * kn / meff, factor * ks * inv_t + roll)
     return 2.0 / math.sqrt(omega2)
 
 
@@ -400,7 +407,7 @@ def _stiffness(res: _Resolution, scene: Scene, geom, species: list[Species]) -> 
 
 
 def pair_table(species: list[Species]) -> np.ndarray:
-    """(S, S, N_PAIR) kn, ks, mu, c_e of every species pair, in the columns
+    """(S, S, N_PAIR) kn, ks, mu, c_e, mu_r of every species pair, in the columns
     ``layout.PAIR_*`` the kernels read (see docs/scene.md)."""
     n = len(species)
     out = np.zeros((n, n, N_PAIR))
@@ -410,13 +417,15 @@ def pair_table(species: list[Species]) -> np.ndarray:
             out[a, b, PAIR_KS] = harmonic_mean(sa.ks, sb.ks)
             out[a, b, PAIR_MU] = 0.5 * (sa.friction + sb.friction)
             out[a, b, PAIR_CE] = restitution_factor(0.5 * (sa.restitution + sb.restitution))
+            out[a, b, PAIR_MUR] = 0.5 * (sa.rolling + sb.rolling)
     return out
 
 
 def wall_table(species: list[Species]) -> np.ndarray:
-    """(S, N_PAIR) kn, ks, mu, c_e of every species against a wall."""
+    """(S, N_PAIR) kn, ks, mu, c_e, mu_r of every species against a wall."""
     out = np.zeros((len(species), N_PAIR))
     for a, s in enumerate(species):
         out[a, PAIR_KN], out[a, PAIR_KS], out[a, PAIR_MU] = s.kn, s.ks, s.friction
         out[a, PAIR_CE] = restitution_factor(s.restitution)
+        out[a, PAIR_MUR] = s.rolling
     return out

@@ -384,6 +384,13 @@ class SpeciesConfig(Config):
            "times its buoyant weight, |rho_p - rho_f| g pi d_eq^3 / 6, against its sliding "
            "(regularised: below the limit it creeps at 1e-6 d_eq xi times the load over the "
            "limit)", 0.0, ge=0)
+    rolling_friction: float = keyfield(
+           "float", "rolling friction coefficient mu_r at this species' contacts, "
+           "dimensionless (disks only): the contacts resist the relative spin of two disks "
+           "(or of a disk on a wall) with a moment of at most mu_r r_eff |F_n| (r_eff = r_i "
+           "r_j / (r_i + r_j); r against a wall), elastic below the limit (stiffness k_s "
+           "r_eff^2); a pair takes the mean of its two species'. 0: smooth spheres, no "
+           "rolling resistance (docs/model.md section 1.2)", 0.0, ge=0, le=1)
 
     def area(self) -> float:
         """Area of the shape, m^2."""
