@@ -519,11 +519,12 @@ def disk_force(bodies: ti.template(), particles: ti.template(), materials: ti.te
                 rj = particles.disk_radius[j]
                 reff = ri * rj / (ri + rj)
                 kr = materials.pair[a, b, PAIR_KS] * reff * reff
-                ii, ij = 0.5 * mi * ri * ri, 0.5 * mj * rj * rj
+                # 1 / I_eff summed in an order symmetric in (i, j), and kept in
+                # range in single precision (I ~ 1e-17 kg m^2 for the vani disks)
+                ieff = 1.0 / (2.0 / (mi * ri * ri) + 2.0 / (mj * rj * rj))
                 mr, m_el = rolling_law(find_roll(hp_old, hs_old, r, i, slots, j),
                                        wi - bodies.omega[r, j], kr,
-                                       materials.pair[a, b, PAIR_CE]
-                                       * ti.sqrt(kr * ii * ij / (ii + ij)),
+                                       materials.pair[a, b, PAIR_CE] * ti.sqrt(kr * ieff),
                                        mur * reff * fn.norm(), dt)
                 store_roll(hp_new, hs_new, r, i, slots, j, m_el)
                 mtot += mr

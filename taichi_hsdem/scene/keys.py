@@ -106,7 +106,8 @@ class RunConfig(Config):
     t_end: float = keyfield("float", "physical time to simulate, s", required=True, gt=0)
     dt: float | str = keyfield("float", 'DEM time step, s, or "auto" (dt_safety times the '
                               "critical step 2 / omega_max of the stiffest, lightest normal or tangential "
-                                   "contact mode)", AUTO, auto=True, gt=0)
+                                   "contact mode, with rolling friction its rolling spring "
+                                   "added)", AUTO, auto=True, gt=0)
     dt_safety: float = keyfield("float", 'fraction of the critical step that dt = "auto" '
                                "uses, dimensionless", 0.15, gt=0, le=1)
     realizations: int = keyfield("int", "independent random realizations run together",
@@ -389,7 +390,8 @@ class SpeciesConfig(Config):
            "dimensionless (disks only): the contacts resist the relative spin of two disks "
            "(or of a disk on a wall) with a moment of at most mu_r r_eff |F_n| (r_eff = r_i "
            "r_j / (r_i + r_j); r against a wall), elastic below the limit (stiffness k_s "
-           "r_eff^2); a pair takes the mean of its two species'. 0: smooth spheres, no "
+           "r_eff^2, with a dashpot of the contact's restitution); a pair takes the mean "
+           "of its two species'. 0: smooth spheres, no "
            "rolling resistance (docs/model.md section 1.2)", 0.0, ge=0, le=1)
 
     def area(self) -> float:
