@@ -194,6 +194,20 @@ def store_roll(hp: ti.template(), hs: ti.template(), r, i, slots: ti.template(),
             hs[r, i, 1, s] = vec2(m, 0.0)
 
 
+@ti.func
+def roll_contact(hp_old: ti.template(), hs_old: ti.template(), hp_new: ti.template(),
+                 hs_new: ti.template(), r, i, slots: ti.template(), partner, w_rel, ks, ce,
+                 reff, ieff, limit, dt):
+    """Disk ``i``'s rolling moment against ``partner`` this step
+    (:func:`rolling_law` with ``k_r = k_s r_eff^2`` and the dashpot
+    ``c_e sqrt(k_r I_eff)``), its elastic part kept in the new history."""
+    kr = ks * reff * reff
+    m, m_el = rolling_law(find_roll(hp_old, hs_old, r, i, slots, partner), w_rel, kr,
+                          ce * ti.sqrt(kr * ieff), limit, dt)
+    store_roll(hp_new, hs_new, r, i, slots, partner, m_el)
+    return m
+
+
 @ti.kernel
 def ls_contacts(bodies: Bodies.Pack, batch: Batch.Pack, particles: CONTACT_PARTICLES,
                 materials: Materials.Pack, templates: Templates.Pack, walls: WallGrid.Pack,
@@ -518,16 +532,13 @@ def disk_force(bodies: ti.template(), particles: ti.template(), materials: ti.te
             if mur > 0.0:
                 rj = particles.disk_radius[j]
                 reff = ri * rj / (ri + rj)
-                kr = materials.pair[a, b, PAIR_KS] * reff * reff
                 # 1 / I_eff summed in an order symmetric in (i, j), and kept in
                 # range in single precision (I ~ 1e-17 kg m^2 for the vani disks)
                 ieff = 1.0 / (2.0 / (mi * ri * ri) + 2.0 / (mj * rj * rj))
-                mr, m_el = rolling_law(find_roll(hp_old, hs_old, r, i, slots, j),
-                                       wi - bodies.omega[r, j], kr,
-                                       materials.pair[a, b, PAIR_CE] * ti.sqrt(kr * ieff),
-                                       mur * reff * fn.norm(), dt)
-                store_roll(hp_new, hs_new, r, i, slots, j, m_el)
-                mtot += mr
+                mtot += roll_contact(hp_old, hs_old, hp_new, hs_new, r, i, slots, j,
+                                     wi - bodies.omega[r, j], materials.pair[a, b, PAIR_KS],
+                                     materials.pair[a, b, PAIR_CE], reff, ieff,
+                                     mur * reff * fn.norm(), dt)
             deepest = ti.max(deepest, depth / (2.0 * ri))
     phi, g = wall_sample(walls, xi)
     depth = ri - phi
@@ -546,13 +557,9 @@ def disk_force(bodies: ti.template(), particles: ti.template(), materials: ti.te
         mtot += cross(ra, fs)
         mur = materials.wall[a, PAIR_MUR]
         if mur > 0.0:
-            kr = materials.wall[a, PAIR_KS] * ri * ri
-            mr, m_el = rolling_law(find_roll(hp_old, hs_old, r, i, slots, n_part), wi, kr,
-                                   materials.wall[a, PAIR_CE]
-                                   * ti.sqrt(kr * 0.5 * particles.mass[i] * ri * ri),
-                                   mur * ri * fn.norm(), dt)
-            store_roll(hp_new, hs_new, r, i, slots, n_part, m_el)
-            mtot += mr
+            mtot += roll_contact(hp_old, hs_old, hp_new, hs_new, r, i, slots, n_part, wi,
+                                 materials.wall[a, PAIR_KS], materials.wall[a, PAIR_CE], ri,
+                                 0.5 * particles.mass[i] * ri * ri, mur * ri * fn.norm(), dt)
         deepest = ti.max(deepest, depth / (2.0 * ri))
     if dropped != 0:   # after the loops (store_shear)
         flags[F_HISTORY_OVERFLOW] += dropped

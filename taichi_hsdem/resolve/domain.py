@@ -19,7 +19,7 @@ from ..scene.keys import AUTO, MAX_PACKING_FRACTION
 from .. import backend
 from .model import (CHECK_INTERVAL, CHECK_TRAVEL, FLUID_CELLS_PER_D, GPU_ARCHS,
                     MAX_TRAVEL_BETWEEN_SOLVES, UPDATE_CELL_FRACTION, Model, Species,
-                    _Resolution)
+                    _Resolution, has_rolling)
 
 
 def _geometry(g) -> wl.Geometry:
@@ -179,7 +179,7 @@ def _memory_parts(scene: Scene, species: list[Species], all_disks: bool, wall_h:
                   "use fewer realizations per run (sweeps and figures batch them) or "
                   "fewer particles")]
     if all_disks:   # the disk's one contact point, and its rolling moment beside it
-        nodes = 2 if any(s.rolling > 0.0 for s in species) else 1
+        nodes = 2 if has_rolling(species) else 1
     else:
         nodes = max(len(s.shape.nodes) for s in species)
     slots = DISK_HISTORY_SLOTS if all_disks else LS_HISTORY_SLOTS

@@ -83,6 +83,12 @@ class Species:
     rolling: float = 0.0    # rolling friction coefficient (disks only; 0: none)
 
 
+def has_rolling(species: list[Species]) -> bool:
+    """Whether some species has rolling friction (disks only): their shear
+    history then keeps each contact's rolling moment beside its force."""
+    return any(s.rolling > 0.0 for s in species)
+
+
 @dataclass
 class Model:
     """The resolved set-up of one scene (no Taichi objects)."""
@@ -115,9 +121,8 @@ class Model:
 
     @property
     def rolling(self) -> bool:
-        """Whether some species has rolling friction (disks only): their shear
-        history then keeps each contact's rolling moment beside its force."""
-        return any(s.rolling > 0.0 for s in self.species)
+        """Whether some species has rolling friction (:func:`has_rolling`)."""
+        return has_rolling(self.species)
 
     @property
     def n_particles(self) -> int:
