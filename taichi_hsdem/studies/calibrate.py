@@ -567,7 +567,8 @@ def main(argv=None, prog: str = "python -m taichi_hsdem calibrate") -> int:
         # the cluster first: one it cannot use is refused before the folder is made
         with pool, StudyFolder(out, "calibrate", legacy=_legacy_files) as folder:
             folder.refuse_foreign(CALIBRATION_FILES, "the calibration")
-            return _calibrate_into(out, args, sets, realizations, rounds, evaluate, folder)
+            return _calibrate_into(out, args, sets, realizations, rounds, evaluate, folder,
+                                   tell or (lambda message: None))
     except ClusterError as exc:
         print(exc, file=sys.stderr)
         return EXIT_INVALID
@@ -577,19 +578,15 @@ def main(argv=None, prog: str = "python -m taichi_hsdem calibrate") -> int:
         return EXIT_INVALID
 
 
-def _calibrate_into(out: Path, args, sets, realizations, rounds, evaluate, folder) -> int:
+def _calibrate_into(out: Path, args, sets, realizations, rounds, evaluate, folder,
+                    say) -> int:
     """:func:`main`'s calibration, in its checked and locked folder ``out``
-    (``folder``: its :class:`~.folder.StudyFolder`). Its files are claimed and
+    (``folder``: its :class:`~.folder.StudyFolder`; ``say``: its progress printer). Its files are claimed and
     ``calibration.csv`` begun when the first round has finished: a calibration
     stopped before (its scene refused at the first round's set-up) leaves the
     folder as it found it."""
     from ..runner import RunFailed
     table = out / "calibration.csv"
-
-    def say(message):
-        if not args.quiet:
-            print(message, file=sys.stderr, flush=True)
-
     rounds_done = []
 
     def evaluate_and_record(value):
