@@ -400,7 +400,8 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
 
         if todo:
             say(f"running {len(todo)} point(s)" + (f" on the cluster {cluster}" if cluster else ""))
-        pool.run(run_point, [(points[k], int(realizations), batch, say if not cluster else None)
+        pool.run(run_point, [(points[k], int(realizations), batch, say if not cluster else None,
+                              f"[{k + 1}/{len(points)}] {points[k].label}")
                              for k in todo], finished)
         for k, run in enumerate(runs):
             if k not in todo:

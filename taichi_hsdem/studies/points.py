@@ -18,6 +18,7 @@ from ..output import atomic_write, json_safe
 from ..resolve import species_shape
 from ..scene import Scene, load_scene, scene_to_toml
 from ..digest import code_digest
+from .progress import PointProgress
 
 
 FIGURES = ("escapees-time", "pmf-collapse", "friction", "shapes", "polygons")
@@ -229,10 +230,13 @@ def _point_info(sim) -> dict:
             "contact_path": "disk" if m.all_disks else "level-set"}
 
 
-def run_point(point: Point, realizations: int, batch: int | None = None, log=None) -> PointRun:
+def run_point(point: Point, realizations: int, batch: int | None = None, log=None,
+              head: str | None = None) -> PointRun:
     """Run ``realizations`` of a point in batches of ``batch`` (default: all at once).
 
-    Realization ``k`` has seed ``run.seed + k`` whatever the batching.
+    Realization ``k`` has seed ``run.seed + k`` whatever the batching. With ``log``
+    (a line printer), a long batch says where it is every few seconds, headed by
+    ``head`` (default: the point's label), and a batch that ends says so.
     """
     # the simulator loads Taichi (about a second): only once there is something to run
     from ..runner import RunFailed, build, execute
@@ -244,11 +248,17 @@ def run_point(point: Point, realizations: int, batch: int | None = None, log=Non
     while done < realizations:
         n = min(batch, realizations - done)
         scene = point.scene.with_values({"run.realizations": n, "run.seed": seed0 + done})
+        progress = None
+        if log is not None:
+            where = head or point.label
+            if n < realizations:
+                where += f" (realizations {done + 1}-{done + n} of {realizations})"
+            progress = PointProgress(log, where)
         try:
-            sim = build(scene)
+            sim = build(scene, on_phase=getattr(progress, "phase", None))
             if not out.info:
                 out.info = _point_info(sim)
-            res = execute(sim)
+            res = execute(sim, progress=progress)
         except RunFailed as exc:
             out.error = "; ".join(exc.lines)
             break
