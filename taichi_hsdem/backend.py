@@ -136,7 +136,7 @@ def _is_software(device) -> bool:
 def refuse_software_gpu(arch: str, precision: str = "f64") -> None:
     """Initialise Taichi for ``arch`` (:func:`init`) and raise :class:`BackendError`
     (one line: the driver and the CPU alternative) when ``arch = "gpu"`` found only a
-    software driver (Mesa's llvmpipe/lavapipe, SwiftShader: 30-100 times slower than
+    software driver (Mesa's llvmpipe/lavapipe, SwiftShader: about 100 times slower than
     the CPU backend; 87 s against 2.9 s measured on vani_phi026). Naming the backend
     (``arch = "vulkan"``) runs there anyway; ``cpu`` and ``auto`` pass (``auto``
     already takes the CPU over a software driver).
@@ -149,7 +149,7 @@ def refuse_software_gpu(arch: str, precision: str = "f64") -> None:
     device = _STATE.get("device")
     if _is_software(device):
         raise BackendError(
-            f"the GPU found is a software driver ({used} on {device}), 30-100 times slower "
+            f"the GPU found is a software driver ({used} on {device}), about 100 times slower "
             f"than the CPU: use --arch cpu (or --arch auto, which takes the CPU here), or "
             f"--arch {used} to run on the software driver anyway")
 

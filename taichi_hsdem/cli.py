@@ -31,7 +31,7 @@ from . import checkpoint, output
 from .exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
 from .scene import SceneError, load_scene
 from .scene.load import path_length_problem
-from .stats.text import estimate_text
+from .stats.text import mean_phrase
 from .stop import Stopped, describe
 from .scene.toml import parse_toml
 
@@ -683,8 +683,7 @@ def _run_timed(args, scene, resume_from, staged, interrupt, clock) -> int:
     clogged = sum(1 for r in s["realizations"] if r["clogged"])
     stats = s["statistics"] or {}
     mean = stats.get("mean_escapees_note") or (
-        f"<s> = {estimate_text(s['mean_escapees'], s['mean_escapees_ci'])} "
-        "(censoring-aware)")
+        f"{mean_phrase(s['mean_escapees'], s['mean_escapees_ci'])} (censoring-aware)")
     _say(args.quiet, f"done in {s['wall_time_s']:.1f} s: {s['steps']} steps, {mean}, "
          f"{clogged}/{len(s['realizations'])} clogged, "
          f"{stats.get('n_never_clogged', 0)} never clogged -> {out}")

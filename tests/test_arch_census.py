@@ -334,3 +334,13 @@ def test_a_checkpoint_with_a_damaged_census_is_refused_in_one_line(vani_run, tmp
     assert main(["--resume", str(folder), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and phrase in err, err
+
+
+def test_the_arches_lines_read_right_for_one_realization_and_no_arch():
+    """Before: "formed in 1 realizations" and "sizes  (mean nan)"."""
+    from taichi_hsdem.studies import arches
+    summary = {"realizations": [{"seed": 4, "status": "ok"}]}
+    lines = arches.run_lines(summary, [[]])
+    assert lines == ["realization 0 (seed 4): 0 arches formed; none held",
+                     "total: 0 arches formed in 1 realization, 0 held"]
+    assert arches.summary_line("mu=0.9", []) == "mu=0.9: 0 clogged, arch found in 0; no sizes"

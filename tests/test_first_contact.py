@@ -130,7 +130,7 @@ def test_a_sweep_point_where_nothing_clogged_says_a_lower_bound(tmp_path):
     row = sweep._row("base", {}, "ran", summary)
     said = estimate_text(None, None, st["mean_escapees_lower_bound"])
     assert said.startswith("> ") and said.endswith("(nothing clogged; 95 % lower bound)")
-    assert sweep.point_text(row) == f"<s> = {said}, 0/4 clogged"
+    assert sweep.point_text(row) == f"<s> {said}, 0/4 clogged"      # not "<s> = > ..."
     assert st["mean_escapees_note"].endswith(said)          # what the run prints
     sweep._write_table([row], tmp_path)
     with open(tmp_path / "sweep.csv", newline="") as fh:

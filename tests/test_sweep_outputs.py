@@ -130,8 +130,21 @@ def test_sweep_png_draws_intervals_and_lower_bounds(tmp_path):
     assert sweep_plot.plot_sweep(rows, path, title="t")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sweep.png"]   # no temp left
-    assert not sweep_plot.plot_sweep([row(0.1, n_ok=0)], tmp_path / "none.png")
-    assert not (tmp_path / "none.png").exists()
+    assert not sweep_plot.plot_sweep([], tmp_path / "empty.png")
+    assert not (tmp_path / "empty.png").exists()
+
+
+def test_sweep_png_is_drawn_when_no_point_has_an_estimate(tmp_path):
+    """Before: a sweep whose points saw no escape and no clog (`--set
+    run.t_end=0.3`) wrote no sweep.png and said nothing; now the points are
+    crosses at the foot of the axes, named, and the sweep names them."""
+    rows = [row(0.1, None), row(0.5, None), row(0.9, 3.0, n_ok=0)]
+    assert sweep_plot.no_estimate(rows) == ["mu=0.1", "mu=0.5", "mu=0.9"]
+    assert sweep_plot.plot_sweep(rows, tmp_path / "none.png")
+    assert (tmp_path / "none.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    mixed = [row(0.1, 8.0, (5.0, 13.0)), row(0.5, None)]
+    assert sweep_plot.no_estimate(mixed) == ["mu=0.5"]
+    assert sweep_plot.plot_sweep(mixed, tmp_path / "mixed.png")
 
 
 # ---------------------------------------------------------------------- progress

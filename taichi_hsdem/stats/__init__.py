@@ -49,7 +49,7 @@ from .geometric import (
 from .gof import MIN_CLOGS, GeometricFitTest, geometric_fit_test, hazard_table
 from .pmf import PMF_BIN_FRACTION, histogram, normalized_pmf, pmf_bins
 from .summary import summarize, unstable_sensitivity
-from .text import censored_fields, estimate_text
+from .text import censored_fields, estimate_text, mean_phrase
 
 __all__ = [
     "GeometricFit",
@@ -70,5 +70,6 @@ __all__ = [
     "summarize",
     "unstable_sensitivity",
     "estimate_text",
+    "mean_phrase",
     "censored_fields",
 ]

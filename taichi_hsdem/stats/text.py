@@ -79,6 +79,23 @@ def estimate_text(mean, ci=None, lower_bound=None, confidence: float = 0.95,
     return f"{float(mean):.{digits}g} [{num(lo, '-')}, {num(hi, 'inf')}]"
 
 
+def mean_phrase(mean, ci=None, lower_bound=None, confidence: float = 0.95,
+                name: str = "<s>") -> str:
+    """``<s>`` with its value for a line of text, reading one way whatever is known.
+
+    >>> mean_phrase(12.34, (8.1, 17.9))
+    '<s> = 12.3 [8.1, 17.9]'
+    >>> mean_phrase(None, (2.857, None))
+    '<s> > 2.86 (nothing clogged; 95 % lower bound)'
+    >>> mean_phrase(None, (0.0, None))
+    '<s>: no estimate (nothing escaped or clogged)'
+    """
+    text = estimate_text(mean, ci, lower_bound, confidence)
+    if text == "-":
+        return f"{name}: no estimate (nothing escaped or clogged)"
+    return f"{name} {text}" if text.startswith(">") else f"{name} = {text}"
+
+
 def censored_fields(mean, ci) -> tuple[float | None, float | None]:
     """``(estimate, lower_bound)`` for a table or JSON: the estimate (None when
     nothing clogged or nothing is known) and the one-sided lower bound when nothing

@@ -209,7 +209,7 @@ def summary_line(label, rows) -> str:
     mean = np.mean([r["arch_size"] for r in found]) if found else math.nan
     parts = [f"{label}: {len(rows)} clogged, arch found in {len(found)}",
              "sizes " + ", ".join(f"{k}: {sizes[k]}" for k in sorted(sizes))
-             + f" (mean {mean:.2f})"]
+             + f" (mean {mean:.2f})" if found else "no sizes"]
     pc = sum(r["pair_curved"] for r in found)
     wc = sum(r["wall_curved"] for r in found)
     if pf + pv:
@@ -334,8 +334,8 @@ def run_lines(summary, arches) -> list[str]:
                if real["status"] != "unstable"]
     every = [r for rows in counted for r in rows]
     held = sum(r["held"] == "true" for r in every)
-    total = (f"total: {_plural(len(every), 'arch')} formed in {len(counted)} realizations, "
-             f"{held} held")
+    total = (f"total: {_plural(len(every), 'arch')} formed in {len(counted)} "
+             f"realization{'' if len(counted) == 1 else 's'}, {held} held")
     if _failures(every):
         total += f"; broken: {_failures(every)}"
     return lines + [total]

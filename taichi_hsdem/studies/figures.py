@@ -260,9 +260,9 @@ def summary_line(command: str, run: PointRun, row: dict) -> str:
                 f"{row['rate']:.3g} +- {row['rate_stderr']:.2g} /s vs theory "
                 f"{row['theory_rate']:.3g} /s (ratio {row['rate_ratio']:.2f}), {run.wall:.1f} s"
                 f"{_kept(run)}")
-    mean = stats.estimate_text(row["mean_s"], (row["mean_s_lo"], row["mean_s_hi"]),
-                               row.get("mean_s_lower_bound"))
-    return (f"{head}, <s> = {mean}, "
+    mean = stats.mean_phrase(row["mean_s"], (row["mean_s_lo"], row["mean_s_hi"]),
+                             row.get("mean_s_lower_bound"))
+    return (f"{head}, {mean}, "
             f"lambda = {_interval_text(row['decay_rate'], row['decay_rate_lo'], row['decay_rate_hi'])}"
             f" /escapee, {run.wall:.1f} s{_kept(run)}")
 

@@ -152,10 +152,10 @@ def point_text(row: Mapping) -> str:
     """A finished point's statistics for its line: ``<s>`` as every message says it
     (:func:`taichi_hsdem.stats.estimate_text`; a lower bound when nothing clogged)
     and the clogs."""
-    from ..stats.text import estimate_text
-    mean = estimate_text(row["mean_escapees"], row["mean_escapees_ci"],
-                         row.get("mean_escapees_lower_bound"))
-    return f"<s> = {mean}, {row['n_clogged']}/{row['n_ok']} clogged"
+    from ..stats.text import mean_phrase
+    mean = mean_phrase(row["mean_escapees"], row["mean_escapees_ci"],
+                       row.get("mean_escapees_lower_bound"))
+    return f"{mean}, {row['n_clogged']}/{row['n_ok']} clogged"
 
 
 _CSV_STATS = ("n", "n_ok", "n_unstable", "n_clogged", "mean_escapees",
@@ -334,10 +334,15 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
     _write_index(out, base, common, {row["folder"]: row["overrides"] for row in rows},
                  {point_folder(p): q for p, q in zip(points, quicks) if q})
     _write_table(rows, out)
-    from .sweep_plot import plot_sweep
+    from .sweep_plot import no_estimate, plot_sweep
     if not plot_sweep(rows, out / SWEEP_PNG, title=f"{Path(base).stem}"
                       + (" (quick: <= 2 realizations a point)" if any(quicks) else "")):
-        (out / SWEEP_PNG).unlink(missing_ok=True)      # no statistics: no stale plot
+        (out / SWEEP_PNG).unlink(missing_ok=True)      # no matplotlib: no stale plot
+    blank = no_estimate(rows)
+    if blank:
+        say(f"{len(blank)} of {len(rows)} point(s) have no estimate of <s> (nothing escaped "
+            f"or clogged, or no stable realization; a longer run.t_end gives one): "
+            f"{', '.join(blank[:5])}{', ...' if len(blank) > 5 else ''}")
     return rows
 
 

@@ -6,8 +6,9 @@ the top of the axes with an arrow); a point where nothing clogged is its one-sid
 (:func:`taichi_hsdem.stats.estimate_text`), never the plain mean of its counts.
 The x axis is the first key whose value changes from point to point and is a
 number; the other changing keys make one series each. A sweep of no numeric key
-has the points in order, named by their folders. Matplotlib is imported on first
-use (the ``plot`` extra); without it nothing is drawn.
+has the points in order, named by their folders. A point with no statistics
+(nothing escaped or clogged) is a cross at the foot of the axes. Matplotlib is
+imported on first use (the ``plot`` extra); without it nothing is drawn.
 """
 from __future__ import annotations
 
@@ -68,18 +69,23 @@ def estimate(row: Mapping) -> tuple[float, float, float, bool] | None:
 
 
 def plot_sweep(rows: Sequence[Mapping], path: Path, title: str = "") -> bool:
-    """Draw ``sweep.png`` at ``path`` (replaced whole); False when there is nothing
-    to draw (no point with statistics) or no matplotlib."""
-    points = [(row, estimate(row)) for row in rows]
-    points = [(row, e) for row, e in points if e is not None]
-    if not points:
+    """Draw ``sweep.png`` at ``path`` (replaced whole); False only when there is no
+    point or no matplotlib. A point without statistics (no stable realization, or
+    none that escaped or clogged) is a cross at the foot of the axes, named in the
+    legend, so that a sweep too short to estimate anything still says so."""
+    if not rows:
         return False
     try:
         plt = pyplot()
     except ImportError:
         return False
-    _draw(plt, points, Path(path), title)
+    _draw(plt, [(row, estimate(row)) for row in rows], Path(path), title)
     return True
+
+
+def no_estimate(rows: Sequence[Mapping]) -> list[str]:
+    """The folders of the points that have no statistics to draw."""
+    return [str(row.get("folder", "")) for row in rows if estimate(row) is None]
 
 
 @without_library_warnings
@@ -89,18 +95,24 @@ def _draw(plt, points, path: Path, title: str) -> None:
     for k, (row, e) in enumerate(points):
         name = ", ".join(f"{key}={row['overrides'].get(key)}" for key in others)
         series.setdefault(name, []).append((k, row, e))
+    known = [e for _, e in points if e is not None]
     tmp = path.with_name(f".{path.name}.tmp.png")
     fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=110)
     try:
-        top = max(e[0] for _, e in points)
-        finite_hi = [e[2] for _, e in points if math.isfinite(e[2])]
+        top = max([e[0] for e in known], default=1.0)
+        finite_hi = [e[2] for e in known if math.isfinite(e[2])]
         cap = max([top, *finite_hi]) * 2.0
+        floor = min([e[1] for e in known], default=cap / 4.0) / 1.5
         for n, (name, members) in enumerate(series.items()):
             if n == MAX_SERIES:
                 break
             xs = [_number(row["overrides"][x_key]) if x_key else k for k, row, _ in members]
             color = f"C{n % 10}"
-            for x, (_, _, (y, lo, hi, is_bound)) in zip(xs, members):
+            for x, (_, _, e) in zip(xs, members):
+                if e is None:
+                    ax.plot([x], [floor * 1.15], "x", color=color, ms=8, mew=1.5)
+                    continue
+                y, lo, hi, is_bound = e
                 up = hi if math.isfinite(hi) else cap
                 ax.plot([x, x], [lo, up], color=color, lw=1.2)
                 if not math.isfinite(hi):
@@ -108,12 +120,22 @@ def _draw(plt, points, path: Path, title: str) -> None:
                                 arrowprops=dict(arrowstyle="->", color=color, lw=1.2))
                 ax.plot([x], [y], "^" if is_bound else "o", color=color,
                         mfc="none" if is_bound else color, ms=7)
-            ax.plot([], [], "o", color=color, label=name or "<s>, 95 % interval")
-        if any(e[3] for _, e in points):
+            if known or name:
+                ax.plot([], [], "o", color=color, label=name or "<s>, 95 % interval")
+        if any(e[3] for e in known):
             ax.plot([], [], "^", color="0.3", mfc="none",
                     label="nothing clogged: 95 % lower bound")
+        if len(known) < len(points):
+            ax.plot([], [], "x", color="0.3", mew=1.5,
+                    label="no estimate: nothing escaped or clogged (run longer)")
+        if not known:
+            ax.text(0.5, 0.55, "no point has an estimate of <s>:\nnothing escaped or clogged "
+                    "within run.t_end", transform=ax.transAxes, ha="center", va="center",
+                    fontsize=9)
         ax.set_yscale("log")
-        ax.set_ylim(min(e[1] for _, e in points) / 1.5, cap * 1.6)
+        if not known:                                   # no scale to read
+            ax.tick_params(axis="y", which="both", left=False, labelleft=False)
+        ax.set_ylim(floor, cap * 1.6)
         ax.set_ylabel("<s> (escapees before a clog)")
         if x_key:
             ax.set_xlabel(x_key)
