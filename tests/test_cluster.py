@@ -46,3 +46,15 @@ def test_cluster_argument_is_checked():
     assert parse("tcp://10.0.0.1:8786") == ("address", "tcp://10.0.0.1:8786")
     with pytest.raises(ClusterError, match="local:N needs a whole number"):
         parse("local:two")
+
+
+@pytest.mark.parametrize("spec, why", [
+    ("tcp://[:::1", "not a scheduler address"),          # Dask took about 10 s on it
+    ("tcp://host:99999", "not a scheduler address"),
+    ("tcp://:8786", "names no host"),
+])
+def test_a_malformed_address_is_refused_before_any_wait(spec, why):
+    with pytest.raises(ClusterError, match=why):
+        parse(spec)
+    assert parse("tcp://[::1]:8786") == ("address", "tcp://[::1]:8786")
+    assert parse("10.0.0.1:8786") == ("address", "10.0.0.1:8786")

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import tempfile
 from typing import Callable, Sequence
+from urllib.parse import urlsplit
 
 from ..limits import usable_cpus
 from ..limits import THREADS_ENV
@@ -42,6 +43,15 @@ def parse(spec: str | None):
         return ("local", int(n) if n else usable_cpus())
     if not spec:
         raise ClusterError("--cluster: give a scheduler address (tcp://host:8786) or local[:N]")
+    try:                        # a malformed address is refused at once, not after a wait
+        parts = urlsplit(spec if "://" in spec else f"tcp://{spec}")
+        parts.port
+    except ValueError as exc:
+        raise ClusterError(f"--cluster {spec}: not a scheduler address ({exc}); give "
+                           f"tcp://host:port or local[:N]") from None
+    if not parts.hostname:
+        raise ClusterError(f"--cluster {spec}: names no host; give tcp://host:port or "
+                           f"local[:N]")
     return ("address", spec)
 
 
