@@ -65,7 +65,7 @@ def init(arch: str = "cpu", precision: str = "f64") -> str:
     >>> backend.init("cpu", "f64")
     'x64'
     """
-    if _STATE:
+    if "request" in _STATE:     # Taichi runs (a failed start leaves only the BLAS limit)
         if _STATE["request"] != (arch, precision):
             if _STATE["precision"] != precision:
                 raise BackendError(

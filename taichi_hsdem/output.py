@@ -571,10 +571,21 @@ class Pictures:
             self.vtk.close()
             summary["vtk"] = {"index": "series.pvd", "frames": self.vtk_frames}
         summary.update(self.notes)
-        summary["plots"] = report.plot_run(result, self.staged.tmp,
-                                           law=report.steady_stream_law(self.sim))
-        if self.sim.throats.network:
-            summary["plots"].update(self._network(result))
+        try:
+            summary["plots"] = report.plot_run(result, self.staged.tmp,
+                                               law=report.steady_stream_law(self.sim))
+            if self.sim.throats.network:
+                summary["plots"].update(self._network(result))
+        except (ImportError, MemoryError) as exc:
+            # e.g. under a tight `ulimit -v` matplotlib's compiled part cannot be
+            # mapped: the results stand, the plots do not
+            why = f"{type(exc).__name__}: {' '.join(str(exc).split())[:160]}"
+            for png in self.staged.tmp.glob("*.png"):
+                png.unlink()
+            summary["plots"] = {"skipped": f"the plots could not be drawn ({why}); the "
+                                           "results are complete"}
+            print(f"plots skipped: they could not be drawn ({why}); the results are "
+                  "complete", file=sys.stderr)
 
     def _network(self, result) -> dict:
         """The empty domain's flow (K0) and each realization's last K/K0 into the

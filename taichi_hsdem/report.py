@@ -62,6 +62,10 @@ def without_library_warnings(draw):
     return quiet
 
 
+#: Why an ensemble plot is left out (its ``*_skipped`` entry in the summary).
+NO_STABLE = "no stable realization with rows to draw (every one went unstable, or none ran)"
+
+
 def _pyplot():
     import matplotlib
     matplotlib.use("Agg")
@@ -211,7 +215,7 @@ def plot_pressure_drop(plt, result, folder: Path) -> dict:
         if r in stable and np.isfinite(dp):
             per.setdefault(r, []).append((t, dp))
     if not per:
-        return {}
+        return {"pressure_drop_skipped": NO_STABLE}
     per = {r: tuple(np.array(rows, dtype=float).T) for r, rows in per.items()}
     held = {r for r in per if real[r]["clogged"]}
     si = result.scene.units == "SI"
@@ -313,14 +317,17 @@ def plot_network(result, folder: Path, throats, geometry, empty) -> dict:
     drawn = {}
     # K(t) / K0
     held = {r for r in stable if real[r]["clogged"]}
+    ratio = {}
     if empty is not None and result.flow:
         ratio = {r: v for r, v in permeability_ratio(result.flow, empty).items() if r in stable}
+        if not ratio:
+            drawn["permeability_skipped"] = NO_STABLE
+    if ratio:
         fig, ax = plt.subplots(figsize=(6.4, 4.2))
-        if ratio:
-            grid, mean, top = ensemble_mean(ratio, held)
-            draw_faint(ax, ratio, held, top)
-            ax.plot(grid, mean, color="C0", lw=2, label=ensemble_label(len(ratio), held & set(ratio)))
-            ax.legend(fontsize=8)
+        grid, mean, top = ensemble_mean(ratio, held)
+        draw_faint(ax, ratio, held, top)
+        ax.plot(grid, mean, color="C0", lw=2, label=ensemble_label(len(ratio), held & set(ratio)))
+        ax.legend(fontsize=8)
         ax.axhline(1.0, color="k", lw=0.6, ls=":")
         ax.set_ylim(bottom=0.0)
         ax.set_xlabel("t (s)" if si else "t")
@@ -355,6 +362,8 @@ def plot_network(result, folder: Path, throats, geometry, empty) -> dict:
         fig.savefig(folder / "throats_clogged.png", dpi=110)
         plt.close(fig)
         drawn["throats_clogged"] = "throats_clogged.png"
+    else:
+        drawn["throats_clogged_skipped"] = NO_STABLE
     # where the clogs formed
     share = np.zeros(T)
     for r, k, x, y, width, passages, clogged, t_clog in result.throats:

@@ -95,6 +95,32 @@ def test_a_checkpoint_is_read_from_one_open_file(tmp_path, monkeypatch):
     assert np.array_equal(sim.bodies.x.to_numpy(), x_first)
 
 
+def test_a_second_start_after_a_refused_one_is_refused_alike(tmp_path):
+    """A sweep under ``ulimit -v``: its first point was refused in one line, the
+    second gave "internal error (KeyError: 'request')" (the failed start had left
+    the backend half recorded). Each start now fails the same way."""
+    import subprocess
+    import sys
+    import textwrap
+    code = textwrap.dedent("""
+        import taichi as ti
+        def failing_init(**kwargs):
+            raise RuntimeError("[host_memory_pool.cpp:allocate_raw_memory@62] Virtual "
+                               "memory allocation (1073741824 B) failed.")
+        ti.init = failing_init
+        from taichi_hsdem import backend
+        for _ in range(2):
+            try:
+                backend.init("cpu", "f64")
+            except backend.AddressSpaceLimit as exc:
+                print("refused:", str(exc)[:40])
+        """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count("refused: Taichi could not reserve") == 2, proc.stdout
+
+
 def test_a_limited_address_space_is_said_in_one_line(tmp_path):
     """Under ``ulimit -v`` Taichi's first reservation fails (a RuntimeError from
     its C++ memory pool, seen at 1.5 GB): one line naming the limit, exit 2, not
@@ -318,3 +344,25 @@ def test_the_largest_seed_runs(tmp_path):
     assert main([HOURGLASS, "--out", str(tmp_path / "o"), "--realizations", "1", "--set",
                  f"run.seed={2 ** 63 - 1}", "--set", "run.t_end=0.05", "--no-video",
                  "--quiet"]) == 0
+
+
+def test_plots_that_cannot_be_drawn_leave_the_results_and_say_so(tmp_path, monkeypatch,
+                                                                 capsys):
+    """Under ``ulimit -v 2000000`` matplotlib's compiled part could not be mapped
+    ("ImportError: ... failed to map segment from shared object") and the whole
+    run was lost as "internal error". Now the results are written, without plots,
+    and one line and the summary say why."""
+    import json
+
+    from taichi_hsdem import report
+
+    def cannot_map(*args, **kwargs):
+        raise ImportError("_backend_agg.so: failed to map segment from shared object")
+    monkeypatch.setattr(report, "plot_run", cannot_map)
+    out = tmp_path / "o"
+    assert main([HOURGLASS, "--out", str(out), "--set", "run.t_end=0.05", "--no-video"]) == 0
+    err = capsys.readouterr().err
+    assert "plots skipped: they could not be drawn (ImportError: " in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["plots"]["skipped"].endswith("the results are complete")
+    assert (out / "escapees.csv").exists() and not list(out.glob("*.png"))

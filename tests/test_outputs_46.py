@@ -176,3 +176,21 @@ def test_the_escapee_series_has_a_column_per_species_and_one_species_keeps_three
         del values[key]
     old = RunState.from_arrays(json.loads(json.dumps(values)), arrays)
     assert old.series_species == [] and old.species_escaped.dtype == np.int64
+
+
+def test_when_every_realization_went_unstable_each_missing_plot_says_why(tmp_path, figures):
+    """Before: throats_clogged.png and pressure_drop.png were simply missing, and
+    permeability.png was drawn with no curve, with no note in the summary."""
+    result, empty = network_result()
+    for row in result.summary["realizations"]:
+        row["status"] = "unstable"
+    drawn = report.plot_network(result, tmp_path, [None] * 10, None, empty)
+    assert drawn["permeability_skipped"] == drawn["throats_clogged_skipped"] == report.NO_STABLE
+    assert "permeability" not in drawn and "throats_clogged" not in drawn
+    assert "permeability.png" not in figures and "throats_clogged.png" not in figures
+    run = run_result(FLOW_RATE)
+    for row in run.summary["realizations"]:
+        row["status"] = "unstable"
+    drawn = report.plot_run(run, tmp_path)
+    assert drawn["pressure_drop_skipped"] == report.NO_STABLE
+    assert "pressure_drop.png" not in figures
