@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 from . import checkpoint, output
-from .exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
+from .exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser, folder_name_problem
 from .scene import SceneError, load_scene
 from .scene.load import path_length_problem
 from .stats.text import mean_phrase
@@ -527,8 +527,8 @@ def _main(args, interrupt) -> int:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID
-    if args.out is not None and not args.out.strip():
-        print("--out: the folder name is empty", file=sys.stderr)
+    if args.out is not None and folder_name_problem(args.out):
+        print(f"--out: {folder_name_problem(args.out)}", file=sys.stderr)
         return EXIT_INVALID
     out = Path(args.out) if args.out else Path(scene.output.dir)
     where = "--out" if args.out else ("--resume" if resume_from else
@@ -576,7 +576,7 @@ def _run_timed(args, scene, resume_from, staged, interrupt, clock) -> int:
     # The simulator loads Taichi (about a second): only once the scene is valid.
     clock.phase("loading Taichi")
     from . import backend
-    from .runner import UNSTABLE_HINT, RunFailed, build, execute
+    from .runner import RunFailed, build, execute, unstable_hint
     try:
         sim = build(scene, place_particles=resume_from is None, on_phase=clock.phase)
         if resume_from is not None:
@@ -653,7 +653,7 @@ def _run_timed(args, scene, resume_from, staged, interrupt, clock) -> int:
         s["status"] = "failed"
         if output.holds_result(out):
             pictures.discard()
-            print(f"{UNSTABLE_HINT}; this run's results were not written: the earlier "
+            print(f"{unstable_hint(sc)}; this run's results were not written: the earlier "
                   f"result in {out} is kept as it was", file=sys.stderr)
             return EXIT_FAILED
     try:
@@ -669,7 +669,7 @@ def _run_timed(args, scene, resume_from, staged, interrupt, clock) -> int:
               file=sys.stderr)
     if bad:
         print(f"the unstable realizations' results were not written (status \"failed\" "
-              f"in {out / 'summary.json'}); {UNSTABLE_HINT}", file=sys.stderr)
+              f"in {out / 'summary.json'}); {unstable_hint(sc)}", file=sys.stderr)
         return EXIT_FAILED
     if sim.interrupted:
         print(f"{interrupt.what} at t = {sim.t:.4g} of {sc.run.t_end:.4g} s: kept "

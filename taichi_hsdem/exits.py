@@ -19,3 +19,26 @@ class Parser(argparse.ArgumentParser):
     def error(self, message):
         print(f"{self.prog}: {message}", file=sys.stderr)
         sys.exit(EXIT_INVALID)
+
+
+def folder_name_problem(text: str) -> str | None:
+    """Why ``text`` cannot name an output folder (empty, or holding a control
+    character such as ESC that a terminal would act on when the path is printed),
+    or None."""
+    import unicodedata
+    if not text.strip():
+        return "the folder name is empty"
+    for c in text:
+        if unicodedata.category(c) == "Cc":
+            return f"the folder name holds the control character U+{ord(c):04X}"
+    return None
+
+
+def folder_name(text: str) -> str:
+    """argparse ``type`` of ``--out``: refuses what :func:`folder_name_problem`
+    names, as the plain run does, instead of quietly writing into the default
+    folder (an empty name) or echoing escape codes."""
+    problem = folder_name_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
+    return text

@@ -20,6 +20,16 @@ from .simulation import Result, RunError, Simulation
 #: What to change when a realization goes numerically unstable.
 UNSTABLE_HINT = ("lower run.dt (or run.dt_safety), raise the particles' kn, or lower the "
                  "driving pressure / flow rate")
+#: The same when the scene sets run.dt itself: a stiffer contact would only lower
+#: the critical time step further below it.
+UNSTABLE_HINT_FIXED_DT = ("lower run.dt (or set it to \"auto\": the contacts' critical "
+                          "step times run.dt_safety), or lower the driving pressure / "
+                          "flow rate")
+
+
+def unstable_hint(scene) -> str:
+    """What to change when realizations of ``scene`` went unstable."""
+    return UNSTABLE_HINT if scene.run.dt == "auto" else UNSTABLE_HINT_FIXED_DT
 #: What to change when a pressure solve does not conserve mass.
 FLUX_HINT = "tighten fluid.solver_tol or refine fluid.cell_size"
 
@@ -67,4 +77,4 @@ def unstable_message(result: Result) -> str | None:
     if not bad:
         return None
     return (f"{len(bad)} realization(s) went unstable (seeds "
-            f"{', '.join(str(r['seed']) for r in bad)}): {UNSTABLE_HINT}")
+            f"{', '.join(str(r['seed']) for r in bad)}): {unstable_hint(result.scene)}")

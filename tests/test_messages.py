@@ -366,3 +366,34 @@ def test_plots_that_cannot_be_drawn_leave_the_results_and_say_so(tmp_path, monke
     summary = json.loads((out / "summary.json").read_text())
     assert summary["plots"]["skipped"].endswith("the results are complete")
     assert (out / "escapees.csv").exists() and not list(out.glob("*.png"))
+
+
+def test_a_forced_time_step_is_not_told_to_stiffen_the_contacts():
+    """With run.dt set by the scene, a stiffer kn lowers the critical step further
+    below it: the advice after an instability was "raise the particles' kn"."""
+    from types import SimpleNamespace
+
+    from taichi_hsdem import load_scene
+    from taichi_hsdem.runner import unstable_hint, unstable_message
+    auto = load_scene(HOURGLASS, [])
+    fixed = load_scene(HOURGLASS, ["run.dt=1e-5"])
+    assert "raise the particles' kn" in unstable_hint(auto)
+    assert "kn" not in unstable_hint(fixed) and unstable_hint(fixed).startswith("lower run.dt")
+    result = SimpleNamespace(scene=fixed, summary={"realizations": [
+        {"status": "unstable", "seed": 3}, {"status": "ok", "seed": 4}]})
+    assert unstable_message(result) == (
+        f"1 realization(s) went unstable (seeds 3): {unstable_hint(fixed)}")
+
+
+def test_pillars_that_close_every_gap_on_the_grid_are_a_refusal(tmp_path, capsys):
+    """pillar_diameter 345e-6 at a spacing of 350e-6 leaves 5 um gaps, closed on
+    the 16.7 um fluid grid: "internal error (ValueError: no active cell of the
+    inlet column ...)" before; one line naming the keys now, exit 2."""
+    scene = str(ROOT / "scenes" / "micromodel.toml")
+    out = tmp_path / "o"
+    assert main([scene, "--out", str(out), "--set", "geometry.pillar_diameter=345e-6",
+                 "--set", "run.t_end=0.01", "--no-video", "--quiet"]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "geometry: on the fluid grid" in line and "no open path joins the inlet" in line
+    assert "fluid.cell_size" in line and "pillar_spacing" in line
+    assert not out.exists()

@@ -105,6 +105,7 @@ def test_two_runs_never_write_one_folder_at_once(tmp_path, capsys):
 
 @pytest.mark.parametrize("make, expected", [
     (lambda d: "", "folder name is empty"),
+    (lambda d: str(d / "a\x1bx"), "control character U+001B"),      # was echoed raw
     (lambda d: (os.symlink(d / "gone", d / "dangling"), str(d / "dangling"))[1],
      "does not exist"),
     (lambda d: (os.symlink(d / "loop", d / "loop"), str(d / "loop" / "x"))[1],

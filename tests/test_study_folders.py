@@ -224,12 +224,15 @@ def test_figures_points_folder_taken_by_a_file_is_one_line(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("figure", [{"figure": "friction", "points": []}, [1, 2],
-                                    {"scene": str(HOURGLASS), "points": [{"label": 1}]}])
+                                    {"scene": str(HOURGLASS), "points": [{"label": 1}]},
+                                    # was "internal error (ValueError: Number of rows ...)"
+                                    {"scene": str(HOURGLASS), "points": []}])
 def test_arches_on_a_figure_json_it_cannot_read_is_one_line(tmp_path, capsys, figure):
     (tmp_path / "figure.json").write_text(json.dumps(figure))
     assert arches.main([str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "figure.json" in err[0] and "not the figure.json" in err[0], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["figure.json"]    # nothing written
 
 
 def test_the_arch_census_never_replaces_the_users_arches_csv(tmp_path, capsys):

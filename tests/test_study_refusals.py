@@ -163,3 +163,39 @@ def test_figures_quiet_says_why_every_point_was_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and err and len(err) <= 3, err
     assert "run.realizations" in err[0], err
+
+
+@pytest.mark.parametrize("command, args", [
+    (sweep_module, [str(ROOT / "scenes" / "sweep_friction.toml")]),
+    (figures, ["friction", "--quick"]),
+    (calibrate, [str(HOURGLASS), "--param", "particles.friction", "--target", "5",
+                 "--lo", "0.1", "--hi", "0.9"]),
+])
+def test_an_empty_out_is_refused_as_a_run_refuses_it(command, args, tmp_path, monkeypatch,
+                                                      capsys):
+    """Before: `--out ""` quietly wrote into the default runs/ folder (a plain run
+    refuses it)."""
+    monkeypatch.chdir(tmp_path)
+    for empty in ("", "  "):
+        assert command.main(args + ["--out", empty]) == 2
+        (line,) = capsys.readouterr().err.strip().splitlines()
+        assert line.endswith("--out: the folder name is empty"), line
+    # an ESC in the name was echoed raw to the terminal in the "done ... ->" line
+    assert command.main(args + ["--out", "a\x1bx"]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.endswith("--out: the folder name holds the control character U+001B"), line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_bad_set_of_a_sweep_is_said_once_in_the_users_words(tmp_path, capsys):
+    """Before: "vani.toml: common: vani.toml (--set run.realizations=1000.0): ..."
+    (the scene twice, "common" for a --set, the value rewritten)."""
+    sweep_file = ROOT / "scenes" / "sweep_friction.toml"
+    out = tmp_path / "s"
+    assert sweep_module.main([str(sweep_file), "--set", "run.realizations=1e3", "--set",
+                              "run.t_end=-1", "--out", str(out)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 2, lines
+    assert lines[0].startswith("--set run.realizations=1e3: run.realizations: ")
+    assert lines[1].startswith("--set run.t_end=-1: run.t_end: ")
+    assert not out.exists()

@@ -345,8 +345,17 @@ def open_channel_speed(model: Model) -> float:
     a property of the scene, the same for every realization, so that no
     realization's numbers depend on the others run beside it."""
     fl = model.scene.fluid
-    solver = PressureSolver(model.fluid_active, model.fluid_dx, model.fluid_dx, fl.viscosity,
-                            model.bc(), n_batch=1, tol=fl.solver_tol, gap=fl.gap)
+    try:
+        solver = PressureSolver(model.fluid_active, model.fluid_dx, model.fluid_dx,
+                                fl.viscosity, model.bc(), n_batch=1, tol=fl.solver_tol,
+                                gap=fl.gap)
+    except ValueError:              # the grid's open cells do not join inlet and outlet
+        unit = " m" if model.scene.units == "SI" else ""
+        raise SceneError([f"{model.scene.source}: geometry: on the fluid grid (cells of "
+                          f"{model.fluid_dx:.3g}{unit}) no open path joins the inlet to the "
+                          "outlet: a gap of the geometry narrower than about a cell is "
+                          "closed; widen the narrowest gap (e.g. geometry.pillar_spacing "
+                          "against pillar_diameter) or refine fluid.cell_size"]) from None
     _, info = solver.solve(np.where(model.fluid_active, model.kappa_free, 0.0))
     return float(np.abs(info.flux_out).max()) / model.geometry.constriction_width
 

@@ -153,6 +153,8 @@ def _figure_json_problem(fig) -> str | None:
     points = fig.get("points")
     if not isinstance(points, list):
         return 'no "points" list'
+    if not points:
+        return 'an empty "points" list (a figure has at least one point)'
     for k, p in enumerate(points):
         if not (isinstance(p, dict) and isinstance(p.get("label"), str)
                 and isinstance(p.get("values"), dict) and isinstance(p.get("overrides"), dict)):

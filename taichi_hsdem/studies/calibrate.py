@@ -54,7 +54,7 @@ from ..scene import load_scene
 from ..scene.toml import toml_value
 from . import fmt
 from .progress import PointProgress
-from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
+from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser, folder_name
 
 __all__ = ["CalibrationError", "Evaluation", "Calibration", "calibrate", "simulation_evaluator"]
 
@@ -500,7 +500,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                    "realization (default the scene's run.seed)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a scalar of the scene (repeatable)")
-    p.add_argument("--out", help="output folder (default runs/calibrate_<scene name>/)")
+    p.add_argument("--out", type=folder_name, help="output folder (default runs/calibrate_<scene name>/)")
     p.add_argument("--cluster", metavar="ADDRESS",
                    help="run each round as a task on a Dask cluster: a scheduler address, or "
                         "local[:N] (the cluster extra)")

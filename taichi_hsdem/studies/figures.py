@@ -117,7 +117,7 @@ from .progress import Eta
 from .folder import StudyFolder, StudyFolderError, point_folder_problem
 from .plots import pyplot, render
 from ..scene import SceneError
-from ..exits import Parser
+from ..exits import Parser, folder_name
 
 
 
@@ -497,7 +497,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     common.add_argument("--realizations", type=int, metavar="N",
                         help=f"realizations per point (default {DEFAULT_REALIZATIONS}, "
                              f"--quick 2-3; the paper: {PAPER_REALIZATIONS})")
-    common.add_argument("--out", metavar="DIR", help="output folder (default runs/figures/<figure>/)")
+    common.add_argument("--out", type=folder_name, metavar="DIR", help="output folder (default runs/figures/<figure>/)")
     common.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="override a scene scalar (repeatable), as in python -m taichi_hsdem")
     common.add_argument("--scene", metavar="TOML", help="base scene instead of the shipped one")

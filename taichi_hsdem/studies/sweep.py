@@ -82,7 +82,7 @@ from typing import Any, Callable, Mapping, Sequence
 from ..output import atomic_write
 from ..scene import Scene, load_scene, scene_to_toml
 from ..digest import code_digest
-from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser
+from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser, folder_name
 from .cluster import Cluster
 from .folder import StudyFolder, StudyFolderError, point_folder_problem
 from .progress import Eta, PointProgress
@@ -451,7 +451,7 @@ def run_point(scene: Scene, point: Mapping, common: Mapping, base: str, where: s
 def _parser(prog: str) -> argparse.ArgumentParser:
     p = Parser(prog=prog, description="Run a parameter sweep: one base scene at many points of overrides, resumable.")
     p.add_argument("sweep", help="sweep file (TOML)")
-    p.add_argument("--out", help="output folder (default runs/<sweep file name>/)")
+    p.add_argument("--out", type=folder_name, help="output folder (default runs/<sweep file name>/)")
     p.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
                    help="skip points whose folder holds a finished run of the same "
                         "scene by the same package code (default: --resume)")
@@ -485,6 +485,18 @@ def main(argv=None, prog: str = "python -m taichi_hsdem sweep") -> int:
         sets = command_line_sets(args.set, sweep.points)
     except SweepError as exc:
         for line in exc.problems:
+            print(line, file=sys.stderr)
+        return EXIT_INVALID
+    from ..scene import SceneError
+    refused = []
+    for text in args.set:              # each --set alone, said in the user's words
+        try:
+            load_scene(sweep.scene, [text])
+        except SceneError as exc:
+            refused += [f"--set {text}: {line.split('): ', 1)[1] if '(--set ' in line else line}"
+                        for line in exc.problems]
+    if refused:
+        for line in refused:
             print(line, file=sys.stderr)
         return EXIT_INVALID
     common = {**sweep.common, **sets}
