@@ -1,7 +1,7 @@
 import signal
 import sys
 
-from .stop import describe, raise_stop
+from .stop import describe, keep_swallowed_stops, raise_stop
 
 # Ctrl-C, SIGTERM and SIGHUP obeyed from the start with one line and 128 + the
 # signal's number, also where the shell started this process with SIGINT ignored (a
@@ -22,6 +22,7 @@ finally:
     if _received:
         print(f"{describe(_received[0])} during set-up: nothing was written", file=sys.stderr)
         sys.exit(128 + int(_received[0]))
+keep_swallowed_stops()
 for _sig in _signals:
     signal.signal(_sig, raise_stop)
 

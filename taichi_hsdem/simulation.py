@@ -39,6 +39,7 @@ from .observables import Result
 from .resolve import Model, resolve
 from .runstate import RealizationResult, RunState
 from .scene import Scene, SceneError
+from .stop import raise_if_swallowed
 
 __all__ = ["Simulation", "Result", "RealizationResult", "RunError"]
 
@@ -552,6 +553,7 @@ class Simulation:
             if stop is not None and stop():
                 self.interrupted = True
                 break
+            raise_if_swallowed()      # a signal's stop that a destructor swallowed
             n = min((rs.steps // every + 1) * every, n_end) - rs.steps
             if fluid_every is not None:
                 n = min(n, fluid_every - rs.steps % fluid_every)

@@ -342,3 +342,42 @@ def test_a_stop_that_a_library_turned_into_its_own_error_is_a_stop(monkeypatch, 
     assert cli._guarded([HOURGLASS], interrupt) == 143
     assert capsys.readouterr().err.strip() == \
         "stopped by SIGTERM during set-up: nothing was written"
+
+
+def test_a_stop_a_destructor_swallows_is_kept_quietly_and_raised_again(tmp_path):
+    """The fuzzer's SIGTERM to a sweep landed in Taichi's ArgPack.__del__: Python
+    printed "Exception ignored in ..." with a traceback and went on, the stop lost.
+    Now the hook keeps it, prints nothing, and it is raised again where it can stop
+    the program."""
+    code = textwrap.dedent("""
+        import os, signal, time
+        from taichi_hsdem import stop
+        stop.keep_swallowed_stops()
+        signal.signal(signal.SIGTERM, stop.raise_stop)
+        class HalfBuilt:
+            def __del__(self):
+                os.kill(os.getpid(), signal.SIGTERM)
+                for _ in range(2000):
+                    time.sleep(0.001)          # the handler runs in here
+        obj = HalfBuilt()
+        del obj
+        print("swallowed", stop.swallowed)
+        try:
+            stop.raise_if_swallowed()
+        except stop.Stopped as exc:
+            print("raised", exc.signum, stop.swallowed)
+        """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=tmp_path)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert proc.stdout.splitlines() == [f"swallowed [{int(signal.SIGTERM)}]",
+                                        f"raised {int(signal.SIGTERM)} []"], proc.stdout
+
+
+def test_a_run_raises_a_swallowed_stop_between_its_chunks(monkeypatch):
+    from taichi_hsdem import Simulation, load_scene, stop
+    sim = Simulation(load_scene(HOURGLASS, ["run.t_end=0.05"]))
+    monkeypatch.setattr(stop, "swallowed", [int(signal.SIGTERM)])
+    with pytest.raises(stop.Stopped) as info:
+        sim.run()
+    assert info.value.signum == signal.SIGTERM and stop.swallowed == []

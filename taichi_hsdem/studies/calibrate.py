@@ -55,6 +55,7 @@ from ..scene.toml import toml_value
 from . import fmt
 from .progress import PointProgress
 from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser, folder_name
+from ..stop import raise_if_swallowed
 
 __all__ = ["CalibrationError", "Evaluation", "Calibration", "calibrate", "simulation_evaluator"]
 
@@ -607,6 +608,7 @@ def _calibrate_into(out: Path, args, sets, realizations, rounds, evaluate, folde
         row.append(repr(info["wall_time_s"]))
         with table.open("a", newline="") as fh:
             csv.writer(fh, lineterminator="\n").writerow(row)
+        raise_if_swallowed()          # a stop a destructor swallowed: the round is kept
         return escapees, clogged, info
 
     say(f"{args.scene}: calibrating {args.param} in [{args.lo:g}, {args.hi:g}] to "

@@ -86,6 +86,7 @@ from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser, folder_name
 from .cluster import Cluster
 from .folder import StudyFolder, StudyFolderError, point_folder_problem
 from .progress import Eta, PointProgress
+from ..stop import raise_if_swallowed
 from .sweep_file import (MAX_POINTS, Sweep, SweepError, _check_points,  # noqa: F401
                          _describe_point, _override_strings, _value_text, expand_grid,
                          command_line_sets, load_sweep, point_folder, quick_overrides)
@@ -329,6 +330,7 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
             return
         say(f"{head}: done in {summary['wall_time_s']:.1f} s, {point_text(rows[k])}"
             + (f"; {message}" if message else "") + left)
+        raise_if_swallowed()          # a stop a destructor swallowed: the point is kept
 
     pool.run(run_point, tasks, finished)
     _write_index(out, base, common, {row["folder"]: row["overrides"] for row in rows},
