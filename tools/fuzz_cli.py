@@ -1044,6 +1044,10 @@ def _main(argv=None) -> int:
     with contextlib.ExitStack() as stack:
         work = Path(a.work) if a.work else Path(stack.enter_context(tempfile.TemporaryDirectory()))
         work.mkdir(parents=True, exist_ok=True)
+        if any(work.iterdir()):
+            print(f"--work {work}: holds files (of an earlier fuzzing?); give an empty or "
+                  "new folder", file=sys.stderr)
+            return 2
         res = run_cases(a.cases, a.seed, a.valid_runs, work.resolve(), a.verbose)
     print(report(res))
     return 1 if res["failures"] else 0
