@@ -332,6 +332,9 @@ def _load(args) -> tuple:
     if args.scene is not None:
         raise SceneError(f"--resume: give either a scene file ({args.scene}) or --resume "
                          f"{args.resume}, not both")
+    problem = folder_name_problem(args.resume)
+    if problem:                         # its name is printed in every line after
+        raise SceneError(f"--resume: {problem}")
     path = Path(args.resume) / checkpoint.FILE
     home = _home_of(Path(args.resume))
     if output.in_use(home):

@@ -317,3 +317,14 @@ def test_a_lock_path_that_is_a_folder_is_refused_in_one_line(tmp_path, capsys):
                            "taichi_hsdem keep the folder's lock: remove it, or choose "
                            "another folder")
     assert sorted(p.name for p in out.iterdir()) == [output.LOCK]
+
+
+def test_resume_of_a_folder_named_with_a_control_character_is_refused(tmp_path, capsys):
+    """An ESC in --resume's folder would be echoed raw in every line after."""
+    odd = tmp_path / "a\x1bx"
+    odd.mkdir()
+    assert main(["--resume", str(odd)]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line == "--resume: the folder name holds the control character U+001B", line
+    assert list(odd.iterdir()) == []
+
