@@ -82,3 +82,22 @@ def test_the_model_lattice_of_pairs_spaced_as_neighbours_is_its_square_lattice()
         assert b["Vy"][0] == pytest.approx(b["Vy"][1], rel=1e-6, abs=1e-12 * abs(b["V"][0]))
         assert b["Vy"][0] == pytest.approx(a["Vy"][0], rel=1e-6, abs=1e-12 * abs(b["V"][0]))
     assert 1.0 < a["V_over_U"] < 1.5                     # outruns the mean flux (phi 0.21)
+
+
+def test_the_dome_prototype_is_symmetric_and_gives_its_lone_lattice_back():
+    """tools/dome_pair_lattice.py (a prototype the validation rejects): its
+    pressure force is the exact adjoint of its carried flux, so the mobility
+    matrix is symmetric (Onsager reciprocity, to round-off); and a pair spaced
+    as its neighbours is its own lone lattice, as for the model."""
+    dome = load_tool("dome_pair_lattice")
+    from taichi_hsdem import load_scene
+    from taichi_hsdem.resolve import resolve
+    model = resolve(load_scene(dome.SCENE, []))
+    h, n = float(model.fluid_dx), 11
+    lone, pair = dome.DomeLattice(model, n, n), dome.DomeLattice(model, n, 2 * n)
+    x0, y0 = (0.5 * n + 0.13) * h, (0.5 * n + 0.71) * h
+    a = lone.solve([(x0, y0)])
+    b = pair.solve([(x0, y0), (x0, y0 + n * h)])
+    assert a["M_asym"] < 1e-12 and b["M_asym"] < 1e-12
+    for key in ("spin", "nospin"):
+        assert b[key]["V_over_U"] == pytest.approx(a[key]["V_over_U"], rel=1e-9)
