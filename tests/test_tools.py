@@ -1,5 +1,6 @@
 """The benchmark and study commands' argument handling (their runs are measured,
 not tested: see docs/performance.md)."""
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -362,3 +363,20 @@ def test_dipole_grid_converges_at_first_order_and_finds_the_carried_fraction():
                             res["c_grid"] * res["lambda"], offsets)
     assert b == pytest.approx(res["target"], rel=0.01)
     assert res["c_grid"] > res["c"]          # the staircase over-blocks: more carried
+
+
+def test_bench_lanes_layouts_give_the_scalar_bits():
+    """tools/bench_lanes.py: the realizations side by side in a cell's vector
+    (2 and 4 lanes) sweep to the same bits as each realization alone (its exit
+    status says so), the premise of a realization-innermost solve."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    tool = Path(__file__).resolve().parents[1] / "tools" / "bench_lanes.py"
+    proc = subprocess.run([sys.executable, str(tool), "--realizations", "4", "--widths", "2,4",
+                           "--nx", "12", "--ny", "9", "--sweeps", "6", "--repeats", "1",
+                           "--threads", "1"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    rows = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
+    assert [r["layout"] for r in rows] == ["scalar", "lanes-2", "lanes-4"]
+    assert all(r["same_bits"] for r in rows)
