@@ -49,14 +49,6 @@ from taichi_hsdem.laws import harmonic_mean  # noqa: E402
 SCENE = str(HERE.parent / "scenes" / "vani_phi026.toml")
 
 
-def pair_cell(dh, phi, gap, arrangement):
-    import stokes_pair_lattice as spl
-    s = spl.Settings(dh=dh, phi=phi, gap=gap, arrangement=arrangement)
-    h = 0.5 * s.s
-    centres = [(0.0, -h), (0.0, h)] if arrangement == "side" else [(-h, 0.0), (h, 0.0)]
-    return s.Lx, s.Ly, centres
-
-
 class DomeLattice:
     def __init__(self, model, nx, ny, ns=4, films=2):
         s = model.species[0]
@@ -191,22 +183,11 @@ class DomeLattice:
 
 
 def run(args):
+    from model_pair_lattice import layout       # the model's tool: the same cells
     model = resolve(load_scene(SCENE, args.set))
     s = model.species[0]
-    H = float(model.scene.fluid.gap)
-    dh = s.d_eq / H
     h = float(model.fluid_dx)
-    if args.lone:
-        if args.n:
-            nx = ny = args.n
-        else:
-            L = 0.5 * dh * math.sqrt(math.pi / args.phi) * H
-            nx = ny = int(round(L / h))
-        base = [(0.0, 0.0)]
-    else:
-        Lx, Ly, cen = pair_cell(dh, args.phi, args.gap, args.arrangement)
-        nx, ny = int(round(Lx * H / h)), int(round(Ly * H / h))
-        base = [(x * H, y * H) for x, y in cen]
+    nx, ny, base = layout(model, args)
     lat = DomeLattice(model, nx, ny, ns=args.ns, films=args.films)
     nb = len(base)
     phi_actual = nb * math.pi * lat.a ** 2 / (nx * ny * h * h)

@@ -195,8 +195,10 @@ class PeriodicLattice:
         return -self.H * (sigma[:, None] * self.avec).sum(axis=0)
 
 
-def run(args):
-    model = resolve(load_scene(SCENE, args.set))
+def layout(model, args):
+    """``(nx, ny, base)``: the periodic cell in grid cells and the particles'
+    centres (m) about its middle, for ``args`` (``lone``, ``n``, ``phi``, ``gap``,
+    ``arrangement``); the cell rounded to whole cells, so phi shifts a little."""
     s = model.species[0]
     H = float(model.scene.fluid.gap)
     dh = s.d_eq / H
@@ -212,6 +214,14 @@ def run(args):
         Lx, Ly, cen = pair_cell(dh, args.phi, args.gap, args.arrangement)
         nx, ny = int(round(Lx * H / h)), int(round(Ly * H / h))
         base = [(x * H, y * H) for x, y in cen]
+    return nx, ny, base
+
+
+def run(args):
+    model = resolve(load_scene(SCENE, args.set))
+    s = model.species[0]
+    h = float(model.fluid_dx)
+    nx, ny, base = layout(model, args)
     lat = PeriodicLattice(model, nx, ny)
     nb = len(base)
     phi_actual = nb * math.pi * lat.radius ** 2 / (nx * ny * h * h)
@@ -231,7 +241,7 @@ def run(args):
            "arrangement": None if args.lone else args.arrangement,
            "gap": None if args.lone else args.gap, "phi_nominal": args.phi,
            "phi_actual": phi_actual, "nx": nx, "ny": ny, "h": h, "d_over_h": s.d_eq / h,
-           "d_over_H": dh, "carried": lat.c, "xi": lat.xi, "kappa_p_over_free": lat.kp / lat.kf,
+           "d_over_H": s.d_eq / float(model.scene.fluid.gap), "carried": lat.c, "xi": lat.xi, "kappa_p_over_free": lat.kp / lat.kf,
            "offsets": len(offs), "V_over_U": float(vu.mean()),
            "V_over_U_std": float(vu.std()), "V_over_U_sem": float(vu.std() / math.sqrt(len(vu))),
            "Vy_over_V_rms": float(np.sqrt(np.mean([np.mean(np.square(r["Vy"]))
