@@ -530,8 +530,9 @@ def _main(args, interrupt) -> int:
         for line in exc.problems:
             print(line, file=sys.stderr)
         return EXIT_INVALID
-    if args.out is not None and folder_name_problem(args.out):
-        print(f"--out: {folder_name_problem(args.out)}", file=sys.stderr)
+    problem = None if args.out is None else folder_name_problem(args.out)
+    if problem:
+        print(f"--out: {problem}", file=sys.stderr)
         return EXIT_INVALID
     out = Path(args.out) if args.out else Path(scene.output.dir)
     where = "--out" if args.out else ("--resume" if resume_from else

@@ -25,13 +25,11 @@ def folder_name_problem(text: str) -> str | None:
     """Why ``text`` cannot name an output folder (empty, or holding a control
     character such as ESC that a terminal would act on when the path is printed),
     or None."""
-    import unicodedata
+    from .scene.checks import control_character
     if not text.strip():
         return "the folder name is empty"
-    for c in text:
-        if unicodedata.category(c) == "Cc":
-            return f"the folder name holds the control character U+{ord(c):04X}"
-    return None
+    character = control_character(text)
+    return f"the folder name holds the control character {character}" if character else None
 
 
 def folder_name(text: str) -> str:

@@ -25,13 +25,13 @@ UNSTABLE_HINT = ("lower run.dt (or run.dt_safety), raise the particles' kn, or l
 UNSTABLE_HINT_FIXED_DT = ("lower run.dt (or set it to \"auto\": the contacts' critical "
                           "step times run.dt_safety), or lower the driving pressure / "
                           "flow rate")
+#: What to change when a pressure solve does not conserve mass.
+FLUX_HINT = "tighten fluid.solver_tol or refine fluid.cell_size"
 
 
 def unstable_hint(scene) -> str:
     """What to change when realizations of ``scene`` went unstable."""
     return UNSTABLE_HINT if scene.run.dt == "auto" else UNSTABLE_HINT_FIXED_DT
-#: What to change when a pressure solve does not conserve mass.
-FLUX_HINT = "tighten fluid.solver_tol or refine fluid.cell_size"
 
 
 class RunFailed(Exception):

@@ -20,6 +20,7 @@ from typing import Callable, Sequence
 from urllib.parse import urlsplit
 
 from ..limits import usable_cpus
+from ..stop import raise_if_swallowed
 from ..limits import THREADS_ENV
 
 INSTALL_HINT = 'pip install "taichi_hsdem[cluster]"'
@@ -118,13 +119,16 @@ class Cluster:
             done: Callable[[int, object], None] | None = None) -> list:
         """``[fn(*t) for t in tasks]``, here or one task per point on the cluster;
         ``done(i, result)`` as each finishes (in finishing order); results in
-        ``tasks``' order."""
+        ``tasks``' order. After each ``done`` a stop that a destructor swallowed
+        (:func:`taichi_hsdem.stop.raise_if_swallowed`) is raised again: the
+        finished point is kept, the study stops."""
         if self.client is None:
             results = []
             for i, t in enumerate(tasks):
                 results.append(fn(*t))
                 if done is not None:
                     done(i, results[-1])
+                raise_if_swallowed()
             return results
         from distributed import as_completed
         futures = [self.client.submit(fn, *t, pure=False) for t in tasks]
@@ -135,4 +139,5 @@ class Cluster:
             results[i] = future.result()
             if done is not None:
                 done(i, results[i])
+            raise_if_swallowed()
         return results

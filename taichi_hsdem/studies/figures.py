@@ -114,7 +114,6 @@ from .points import (DEFAULT_POINTS, DEFAULT_REALIZATIONS, FIGURES, PAPER_REALIZ
                      load_point, point_file, point_key, run_point, save_point, series_by_seed)
 from .cluster import Cluster, ClusterError
 from .progress import Eta
-from ..stop import raise_if_swallowed
 from .folder import StudyFolder, StudyFolderError, point_folder_problem
 from .plots import pyplot, render
 from ..scene import SceneError
@@ -398,7 +397,6 @@ def run_figure(command: str, *, quick=False, realizations=None, out=None, sets=(
             left = eta.done()
             if left:
                 say(left)
-            raise_if_swallowed()      # a stop a destructor swallowed: the point is kept
 
         if todo:
             say(f"running {len(todo)} point(s)" + (f" on the cluster {cluster}" if cluster else ""))

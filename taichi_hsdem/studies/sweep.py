@@ -86,7 +86,6 @@ from ..exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, Parser, folder_name
 from .cluster import Cluster
 from .folder import StudyFolder, StudyFolderError, point_folder_problem
 from .progress import Eta, PointProgress
-from ..stop import raise_if_swallowed
 from .sweep_file import (MAX_POINTS, Sweep, SweepError, _check_points,  # noqa: F401
                          _describe_point, _override_strings, _value_text, expand_grid,
                          command_line_sets, load_sweep, point_folder, quick_overrides)
@@ -330,7 +329,6 @@ def _run_points(out, base, points, scenes, keys, common, study, resume, progress
             return
         say(f"{head}: done in {summary['wall_time_s']:.1f} s, {point_text(rows[k])}"
             + (f"; {message}" if message else "") + left)
-        raise_if_swallowed()          # a stop a destructor swallowed: the point is kept
 
     pool.run(run_point, tasks, finished)
     _write_index(out, base, common, {row["folder"]: row["overrides"] for row in rows},
@@ -494,9 +492,9 @@ def main(argv=None, prog: str = "python -m taichi_hsdem sweep") -> int:
     for text in args.set:              # each --set alone, said in the user's words
         try:
             load_scene(sweep.scene, [text])
-        except SceneError as exc:
-            refused += [f"--set {text}: {line.split('): ', 1)[1] if '(--set ' in line else line}"
-                        for line in exc.problems]
+        except SceneError as exc:       # without load_scene's "FILE (--set TEXT): "
+            origin = f"{Path(sweep.scene)} (--set {text}): "
+            refused += [f"--set {text}: {line.removeprefix(origin)}" for line in exc.problems]
     if refused:
         for line in refused:
             print(line, file=sys.stderr)
