@@ -367,8 +367,9 @@ def test_dipole_grid_converges_at_first_order_and_finds_the_carried_fraction():
 
 def test_bench_lanes_layouts_give_the_scalar_bits():
     """tools/bench_lanes.py: the realizations side by side in a cell's vector
-    (2 and 4 lanes) sweep to the same bits as each realization alone (its exit
-    status says so), the premise of a realization-innermost solve."""
+    (2 and 4 lanes), in ndarrays (the package's storage) and in fields, sweep to
+    the same bits as each realization alone in an ndarray (its exit status says
+    so), the premise of a realization-innermost solve."""
     import subprocess
     import sys
     from pathlib import Path
@@ -378,5 +379,29 @@ def test_bench_lanes_layouts_give_the_scalar_bits():
                            "--threads", "1"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     rows = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
-    assert [r["layout"] for r in rows] == ["scalar", "lanes-2", "lanes-4"]
+    assert [r["layout"] for r in rows] == ["ndarray-scalar", "ndarray-lanes-2", "ndarray-lanes-4",
+                                           "field-scalar", "field-lanes-2", "field-lanes-4"]
     assert all(r["same_bits"] for r in rows)
+    assert rows[0]["speedup_over_ndarray_scalar"] == 1.0
+
+
+def test_bench_order_times_both_numberings_of_the_same_disks():
+    """tools/bench_order.py: the placed and the cell-ordered numbering of the same
+    disks, timed in turn; cell order puts consecutive bodies about a cell apart
+    (the placement scatters them), and the two runs end with every disk within a
+    small fraction of a diameter of its twin (the owner rule of shared cells
+    and the order of sums are all that differ)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    tool = Path(__file__).resolve().parents[1] / "tools" / "bench_order.py"
+    proc = subprocess.run([sys.executable, str(tool), "--case", "channel-300", "--steps", "10",
+                           "--repeats", "1", "--warm", "2"], capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    row = json.loads([line for line in proc.stdout.splitlines() if line.startswith("{")][-1])
+    assert row["bodies"] == 300
+    assert row["spacing_d"]["cells"] < 3.0 < 10.0 < row["spacing_d"]["placed"]
+    assert 0.0 <= row["end_positions_apart_d"] < 1e-3
+    assert all(v > 0 for v in row["ms_per_step"].values())
+    assert len(row["ratio_cells_over_placed"]) == 1
