@@ -30,8 +30,9 @@ status is 1 if any differs. ``--no-scalarize`` runs with
 ``real_matrix_scalarize=False`` (Taichi hands the vectors to LLVM whole).
 
 Measured (docs/performance.md, "Realizations side by side"): the vectors pay
-only in fields, about 2 times per cell and realization at 4 lanes, where
-ndarrays of vectors run no faster than the scalar layout.
+only in fields, 2.5-2.8 times per cell and realization at 4 lanes (LLVM
+vectorizes the division), where ndarrays of vectors run 1.1 times; 8 lanes
+spill.
 
     python tools/bench_lanes.py [--realizations 16] [--widths 2,4,8] [--storage ndarray,field]
                                 [--nx 175 --ny 61] [--sweeps 20] [--repeats 7]
@@ -47,7 +48,7 @@ import time
 
 import numpy as np
 
-_NAMES = ("x", "b", "inv", "ae", "an")
+_NAMES = ("x", "b", "ae", "an")
 # Taichi's CPU backend hands a parallel loop to its threads in blocks of up to 512
 # iterations: a loop over groups takes 512 per group, one of them working, as the
 # package's loops over realizations do (fluid/_gmg_cycle.py: _TASK).
@@ -55,11 +56,10 @@ _TASK = 512
 
 
 def _sweep_body(ti, G, nx, ny):
-    """The half-sweeps of every group on arrays ``x, b, inv, ae, an`` (any storage
+    """The half-sweeps of every group on arrays ``x, b, ae, an`` (any storage
     and element: the arithmetic is written once)."""
     @ti.func
-    def body(n, x: ti.template(), b: ti.template(), inv: ti.template(), ae: ti.template(),
-             an: ti.template()):
+    def body(n, x: ti.template(), b: ti.template(), ae: ti.template(), an: ti.template()):
         for t in range(G * _TASK):                      # one thread per group
             g = t // _TASK
             if t % _TASK != 0:
@@ -71,9 +71,12 @@ def _sweep_body(ti, G, nx, ny):
                     first = 1 + (i + 1 + colour) % 2       # (i + j) % 2 == colour
                     for jj in range((ny - 1 - first) // 2 + (ny - 1 - first) % 2):
                         k = base + i * ny + first + 2 * jj
-                        s = (b[k] + ae[k] * x[k + ny] + ae[k - ny] * x[k - ny]
-                             + an[k] * x[k + 1] + an[k - 1] * x[k - 1])
-                        x[k] = s * inv[k]
+                        # the package's Gauss-Seidel update (fluid/_gmg_cycle.py:
+                        # _relax): the diagonal from the four faces, 0 where it is 0
+                        d = ae[k] + an[k] + ae[k - ny] + an[k - 1]
+                        s = (b[k] + (ae[k - ny] * x[k - ny] + ae[k] * x[k + ny]
+                                     + an[k - 1] * x[k - 1] + an[k] * x[k + 1]))
+                        x[k] = ti.select(d > 0, s / d, 0.0)
     return body
 
 
@@ -94,8 +97,8 @@ def build(ti, storage, R, W, nx, ny):
     A = ti.types.ndarray(dtype=element, ndim=1)
 
     @ti.kernel
-    def run_nd(n: ti.i32, x: A, b: A, inv: A, ae: A, an: A):
-        body(n, x, b, inv, ae, an)
+    def run_nd(n: ti.i32, x: A, b: A, ae: A, an: A):
+        body(n, x, b, ae, an)
 
     return arrays, lambda n: run_nd(n, *arrays)
 
@@ -105,9 +108,8 @@ def coefficients(R, nx, ny, seed=0):
     rng = np.random.default_rng(seed)
     ae = rng.uniform(0.5, 1.5, (R, nx, ny))
     an = rng.uniform(0.5, 1.5, (R, nx, ny))
-    diag = ae + np.roll(ae, 1, 1) + an + np.roll(an, 1, 2) + 1e-3
-    return {"x": np.zeros((R, nx, ny)), "b": rng.uniform(-1, 1, (R, nx, ny)),
-            "inv": 1.0 / diag, "ae": ae, "an": an}
+    return {"x": np.zeros((R, nx, ny)), "b": rng.uniform(-1, 1, (R, nx, ny)), "ae": ae,
+            "an": an}
 
 
 def fill(arrays, data, R, W, nx, ny):
