@@ -174,6 +174,48 @@ def test_a_realization_alone_gives_the_bits_it_gets_in_a_batch(parallel):
             np.testing.assert_array_equal(info.flux_out[r], info_r.flux_out[0])
 
 
+def test_a_batch_runs_its_realizations_side_by_side_only_where_they_vectorize():
+    """The lanes (_gmg_lanes) take a CPU batch of float64 solved one realization per
+    thread; a realization alone, the rows and cells ways and float32 keep one
+    realization per thread (so the bit tests around here compare the two)."""
+    active = np.ones((20, 12), bool)
+    assert TaichiPressureSolver(active, 1.0, 1.0, 1.0, FLOW, n_batch=5, gap=0.5)._lanes
+    for extra in ({"n_batch": 1}, {"n_batch": 5, "parallel": "rows"},
+                  {"n_batch": 5, "parallel": "cells"}, {"n_batch": 5, "real": "f32"}):
+        assert TaichiPressureSolver(active, 1.0, 1.0, 1.0, FLOW, gap=0.5, **extra)._lanes is None
+
+
+@pytest.mark.parametrize("bc", [FLOW, PRESSURE])
+def test_realizations_side_by_side_give_the_bits_of_one_per_thread(bc, monkeypatch):
+    """Five realizations (a group of four and one with three idle lanes) of
+    different permeabilities, so that they stop after different iteration counts:
+    the lanes give each the pressure, fluxes, residual and iteration count of the
+    one-realization-per-thread solve, cold and warm-started; and again after a
+    solver of another grid has used the shared lanes (whose values then lie where
+    this grid has its ghosts)."""
+    shape, R = (45, 29), 5
+    active = walled(shape)
+    kappas = [np.stack([disk_field(shape, 10 * r + step, 4 + 3 * r, 3.0, 10.0 ** -(r % 3 + 1))
+                        for r in range(R)]) for step in range(2)]
+    answers = {}
+    for lanes in (False, True):
+        monkeypatch.setattr(TaichiPressureSolver, "lanes", lanes)
+        if lanes:   # another grid and batch through the lanes first
+            other = TaichiPressureSolver(np.ones((70, 38), bool), 1.0, 1.0, 1.0, bc,
+                                         n_batch=6, gap=0.5)
+            other.solve(disk_field((70, 38), 99, 20, 3.0, 1e-2)[None].repeat(6, 0))
+        solver = TaichiPressureSolver(active, 0.5, 0.5, 2.0, bc, n_batch=R, gap=0.5)
+        assert (solver._lanes is not None) == lanes
+        answers[lanes] = [solver.solve(k) for k in kappas]
+    counts = set()
+    for (p0, i0), (p1, i1) in zip(answers[False], answers[True]):
+        np.testing.assert_array_equal(p0, p1)
+        np.testing.assert_array_equal(i0.flux_out, i1.flux_out)
+        assert (i0.iterations, i0.residual) == (i1.iterations, i1.residual)
+        counts.add(i0.iterations)
+    assert counts != {0}
+
+
 def test_the_three_ways_of_parallel_work_agree():
     shape = (96, 70)  # large enough for rows to use both the level kernels and the serial tail
     kappa = disk_field(shape, seed=3, count=30, radius=3.0, contrast=1e-3)

@@ -131,6 +131,25 @@ def test_a_realization_alone_gives_the_bits_it_gets_in_a_batch(parallel):
         np.testing.assert_array_equal(p[r], p_r)
 
 
+def test_moving_bodies_side_by_side_give_the_bits_of_one_realization_per_thread(monkeypatch):
+    """The moving bodies' term in the lanes (_gmg_lanes: lane by lane on the
+    ndarrays): five realizations, each its own bodies, give the pressure of the
+    one-realization-per-thread solve bit for bit, cold and warm."""
+    shape, R = (45, 29), 5
+    active = np.ones(shape, bool)
+    owner, centre, kappa, mobility, drift = bodies_on(shape, R, seed=11)
+    answers = {}
+    for lanes in (False, True):
+        monkeypatch.setattr(TaichiPressureSolver, "lanes", lanes)
+        solver = TaichiPressureSolver(active, DX, DY, ETA, FLOW, n_batch=R, gap=GAP)
+        assert (solver._lanes is not None) == lanes
+        terms = device(owner, centre, mobility, drift)
+        answers[lanes] = [solver.solve(kappa, bodies=terms)[0] for _ in range(2)]
+    for p0, p1 in zip(answers[False], answers[True]):
+        np.testing.assert_array_equal(p0, p1)
+    assert not np.array_equal(answers[True][0][0], answers[True][0][1])
+
+
 def test_bad_body_arrays_are_refused():
     shape = (20, 12)
     active = np.ones(shape, bool)

@@ -6,6 +6,8 @@ and the Cholesky factor are in :mod:`._gmg_setup`. Package-internal: :mod:`.gmg`
 is the API."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 
+from typing import NamedTuple
+
 from ..backend import ti
 
 # Most CG iterations one realization may take in one solve. From zero to 1e-8
@@ -134,6 +136,56 @@ _Grid = ti.types.ndarray(ndim=3)     # any float type: the simulation's kappa
 _Vectors = ti.types.ndarray(ndim=4)  # (R, nx, ny, 2), any float type
 
 
+# ---------------------------------------------------------------- lanes
+# The cell helpers below serve two storages. The package's: ``op`` an ndarray of
+# (Tx, Ty) per cell, ``mg``/``cg`` ndarrays of rows, one realization's values per
+# cell. And realizations side by side (:mod:`._gmg_lanes`): ``op`` a LaneOps of
+# two fields, ``mg``/``cg`` fields of rows, each cell's value a vector of LANES
+# realizations' values, the arithmetic of every lane that of the scalar code.
+
+#: Realizations side by side in a lane solve (:mod:`._gmg_lanes`): a 256-bit
+#: register of float64 (tools/bench_lanes.py: 4 vectorize, 8 spill).
+LANES = 4
+
+
+class LaneOps(NamedTuple):
+    """The operator of a lane solve: the east (``tx``) and north (``ty``)
+    transmissibilities, each a field of ``vector(LANES)`` per flat index."""
+    tx: object
+    ty: object
+
+
+def _is_lanes(op):
+    """Whether the helpers work on lanes (compile time: ``ti.static``)."""
+    return isinstance(op, LaneOps)
+
+
+@ti.func
+def _tx(op: ti.template(), k):
+    """Tx of flat index k (a vector of lanes, or one value)."""
+    if ti.static(_is_lanes(op)):
+        return op.tx[k]
+    else:
+        return op[k][_TX]
+
+
+@ti.func
+def _ty(op: ti.template(), k):
+    if ti.static(_is_lanes(op)):
+        return op.ty[k]
+    else:
+        return op[k][_TY]
+
+
+@ti.func
+def _zero(op: ti.template()):
+    """0 in the storage of ``op``: a vector of lanes, or one value."""
+    if ti.static(_is_lanes(op)):
+        return ti.Vector([0.0] * LANES, dt=REAL.dtype)
+    else:
+        return ti.cast(0.0, REAL.dtype)
+
+
 # ---------------------------------------------------------------- cell helpers
 # ``k`` is a flat index and ``s = ny + 1`` the column stride of its level.
 @ti.func
@@ -145,14 +197,14 @@ def _index(geo: ti.template(), l, r, i, j):
 
 @ti.func
 def _diagonal(op: ti.template(), k, s):
-    return op[k][_TX] + op[k][_TY] + op[k - s][_TX] + op[k - 1][_TY]
+    return _tx(op, k) + _ty(op, k) + _tx(op, k - s) + _ty(op, k - 1)
 
 
 @ti.func
 def _neighbours(op: ti.template(), a: ti.template(), row, k, s):
     """``sum_f T_f a_f`` over the four faces of cell k (a ghost's a is 0)."""
-    return (op[k - s][_TX] * a[row, k - s] + op[k][_TX] * a[row, k + s]
-            + op[k - 1][_TY] * a[row, k - 1] + op[k][_TY] * a[row, k + 1])
+    return (_tx(op, k - s) * a[row, k - s] + _tx(op, k) * a[row, k + s]
+            + _ty(op, k - 1) * a[row, k - 1] + _ty(op, k) * a[row, k + 1])
 
 
 @ti.func
@@ -174,18 +226,30 @@ def _relax(op: ti.template(), mg: ti.template(), k, s, reads, alpha, parents):
     the corrected field is never stored.
     """
     d = _diagonal(op, k, s)
-    x = ti.cast(0.0, REAL.dtype)
-    if d > 0:
-        v = mg[_B, k]
-        if reads == _STORED:
-            v += _neighbours(op, mg, _X, k, s)
-        elif reads == _CORRECTED:
-            v += (op[k - s][_TX] * (mg[_X, k - s] + alpha * mg[_X, parents[0]])
-                  + op[k][_TX] * (mg[_X, k + s] + alpha * mg[_X, parents[1]])
-                  + op[k - 1][_TY] * (mg[_X, k - 1] + alpha * mg[_X, parents[2]])
-                  + op[k][_TY] * (mg[_X, k + 1] + alpha * mg[_X, parents[3]]))
-        x = v / d
-    mg[_X, k] = x
+    if ti.static(_is_lanes(op)):
+        # every lane computes; a lane without an unknown keeps 0 (its quotient,
+        # by a zero diagonal, is dropped)
+        mg[_X, k] = ti.select(d > 0, _relaxed(op, mg, k, s, reads, alpha, parents) / d,
+                              _zero(op))
+    else:
+        x = ti.cast(0.0, REAL.dtype)
+        if d > 0:
+            x = _relaxed(op, mg, k, s, reads, alpha, parents) / d
+        mg[_X, k] = x
+
+
+@ti.func
+def _relaxed(op: ti.template(), mg: ti.template(), k, s, reads, alpha, parents):
+    """``b + sum_f T_f x_f`` of _relax, the neighbours read as ``reads`` says."""
+    v = mg[_B, k]
+    if reads == _STORED:
+        v += _neighbours(op, mg, _X, k, s)
+    elif reads == _CORRECTED:
+        v += (_tx(op, k - s) * (mg[_X, k - s] + alpha * mg[_X, parents[0]])
+              + _tx(op, k) * (mg[_X, k + s] + alpha * mg[_X, parents[1]])
+              + _ty(op, k - 1) * (mg[_X, k - 1] + alpha * mg[_X, parents[2]])
+              + _ty(op, k) * (mg[_X, k + 1] + alpha * mg[_X, parents[3]]))
+    return v
 
 
 @ti.func
@@ -270,7 +334,7 @@ def _restrict_row(op: ti.template(), mg: ti.template(), geo: ti.template(), l, r
     west = _index(geo, l, r, 2 * I, 0)
     coarse = _index(geo, l + 1, r, I, 0)
     for J in range(J0, J1):
-        v = ti.cast(0.0, REAL.dtype)
+        v = _zero(op)
         for a in ti.static((0, 1)):
             if 2 * I + a < nx and 2 * J + a < ny:
                 k = west + a * (s + 1) + 2 * J

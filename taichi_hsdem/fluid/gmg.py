@@ -113,6 +113,8 @@ from ._gmg_cycle import (CG_ROWS, COARSEST_CELLS, MAXITER, N_CONSTS, N_FLAGS, RE
                          _K_DX, _K_DY, _K_GX, _K_GY, _K_INFLOW, _K_PREF, _K_TOL2, _KEEP,
                          _PARALLEL, _RES, _SOL, _SEGMENT, _SIDE_NAMES, _ZEROS, _restrict,
                          _serial_cycle, _smooth, _smooth_blocks, vec2)
+from ._gmg_lanes import _solve_lanes, lane_geo
+from ._gmg_lanes import pool as lane_pool
 from ._gmg_setup import (_assemble, _coarsen, _copy_rhs, _factor, _load_guess, _scan,
                          _set_carried_rhs)
 
@@ -325,7 +327,12 @@ class TaichiPressureSolver:
         self._geo = _upload(geo, ti.i32)
         real = self.real
         self._op = ti.ndarray(vec2(real), (int(offsets[-1]),))
-        self._mg = ti.ndarray(real, (2, int(offsets[-1])))
+        # Realizations side by side (._gmg_lanes): a batch solved one realization
+        # per thread on the CPU in float64, whose lanes vectorize; their own
+        # multigrid rows replace these
+        lanes = (self.lanes and self.parallel == "realizations" and R > 1
+                 and real == ti.f64 and not backend.on_gpu())
+        self._mg = ti.ndarray(real, (2, 1 if lanes else int(offsets[-1])))
         self._cg = ti.ndarray(real, (CG_ROWS, fine))
         segments = (ny + _SEGMENT - 1) // _SEGMENT
         self._part = ti.ndarray(real, (2, R * nx * segments))  # the segment sums
@@ -359,6 +366,11 @@ class TaichiPressureSolver:
                                 box=_upload(np.full((1, 1, 4), -1), ti.i32))
         self._bodies = None                        # those of the solve under way
         self._terms = None   # their pack (Terms), kept while the same arrays come
+        self._lanes = None
+        if lanes:
+            table, entries, fine_lanes, groups = lane_geo(levels, R)
+            self._lane_geo = _upload(table, ti.i32)
+            self._lanes = lane_pool(real).fit(entries, fine_lanes, groups)
 
     # ------------------------------------------------------------------ public
     def solve(self, kappa, x0=None, carried=None, occupied=None, *, host=True, bodies=None):
@@ -592,6 +604,12 @@ class TaichiPressureSolver:
                   self._geo)
         maxiter = int(MAXITER)
         body = self._body_args()
+        if self._lanes is not None:
+            lanes = self._lanes
+            _solve_lanes(self._op, self._cg, self._state, self._flags, self._geo, self._chol,
+                         self._lane_geo, self._consts, maxiter, *body, lanes.ops.tx,
+                         lanes.ops.ty, lanes.mg, lanes.cg, lanes.chol)
+            return self._read_report(k_dev)
         if self.parallel == "realizations":
             _solve_each(*arrays, self._chol, self._consts, maxiter, *body)
             return self._read_report(k_dev)
@@ -616,6 +634,10 @@ class TaichiPressureSolver:
     #: Whether a GPU solve runs CG iterations unread (see _iterate); False reads
     #: after each, as on the CPU (the same bits).
     unread_iterations = True
+
+    #: Whether a batch solved one realization per thread runs its realizations
+    #: side by side (._gmg_lanes; False: one per thread; the same bits).
+    lanes = True
 
     def _read_report(self, k_dev):
         _boundary_fluxes(k_dev, self._cg, self._unknown, self._sides_dev, self._state,

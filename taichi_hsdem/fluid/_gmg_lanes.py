@@ -1,0 +1,358 @@
+"""Realizations side by side in the Taichi pressure solver (:mod:`.gmg`): the whole
+CG solve of LANES realizations in one thread, each cell's values of the group one
+``vector(LANES)``, so that the compiler turns the group's arithmetic into vector
+instructions (docs/performance.md, "Realizations side by side").
+
+The vectors live in Taichi fields, not in the ndarrays of the rest of the
+solver: from ndarrays the same code stays scalar (``tools/bench_lanes.py``). A
+solve copies each group's operators (every level), Cholesky factors, right-hand
+side, guess and last search direction from the ndarrays into the fields, solves,
+and copies the solution and search direction back; the fields keep nothing
+between solves, so every solver of a process shares them (:class:`LanePool`,
+grown to the largest; a kernel is compiled per pool, not per solver).
+
+Each lane runs the operations of the one-thread-per-realization solve
+(:func:`._gmg_cg._solve_one`) in the same order, so its bits are that solve's, alone
+or in any batch: the V-cycle's helpers are those of :mod:`._gmg_cycle`, which
+take either storage; CG's scalars are vectors of the lanes' values, and where a
+lane's solve does something another's does not (stop, check its true residual,
+start again) the others' values are kept by a select, their arithmetic done and
+dropped. The moving bodies' term runs lane by lane on the ndarrays
+(:func:`._gmg_bodies._product_of`): its cells differ between realizations.
+Float64 only; float32 solves keep the scalar way. Package-internal."""
+# No "from __future__ import annotations": Taichi reads kernel annotations as objects.
+import numpy as np
+
+from ..backend import ti
+from ._gmg_bodies import Terms, _product_of
+from ._gmg_cycle import (COARSEST_CELLS, LANES, OVERCORRECTION, REAL, _ADIR, _ALPHA, _B,
+                         _BB, _BETA, _CHECK, _Chol, _Consts, _DIR, _FIRST, _ITERS, _Ints,
+                         _K_TOL2, _NX, _NY, _Ops, _PW, _RES, _RHS, _RR, _RUNNING, _RZ, _Rows,
+                         _SOL, _TASK, _TX, _TY, _UNDRIVEN, _X, LaneOps, _apply, _cycle_of,
+                         _diagonal, _index, _segment, _segments)
+
+#: Rows of the lanes' CG field: those of the ndarray up to the bodies' term.
+_CG_ROWS = _PW + 1
+
+
+def lane_geo(levels, n_batch):
+    """The level table (offset, nx, ny) of the lanes' fields: a group of LANES
+    realizations where the ndarrays have one realization."""
+    groups = -(-n_batch // LANES)
+    sizes = [groups * (nx + 2) * (ny + 1) for nx, ny in levels]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    return (np.array([[offsets[l], nx, ny] for l, (nx, ny) in enumerate(levels)],
+                     dtype=np.int32), int(offsets[-1]), int(sizes[0]), groups)
+
+
+class LanePool:
+    """The lanes' fields, shared by every solver of one float type in a process
+    and grown to the largest asked for, in powers of two (a solve copies in what
+    it needs and keeps nothing there after; the fields stay until the process
+    ends)."""
+
+    def __init__(self, real):
+        self.real = real
+        self.capacity = (0, 0, 0)   # (all levels' entries, the finest level's, groups)
+        self.tree = None
+        self.ops = self.mg = self.cg = self.chol = None
+
+    def fit(self, entries, fine, groups):
+        """Fields holding ``entries`` flat indices on all levels, ``fine`` on the
+        finest and the Cholesky factors of ``groups`` groups."""
+        if all(n <= c for n, c in zip((entries, fine, groups), self.capacity)):
+            return self
+        # powers of two, so that few sizes occur: a kernel is compiled for each
+        # (Taichi's offline cache keeps it across runs, keyed by the sizes)
+        entries, fine, groups = (1 << (max(n, c) - 1).bit_length() for n, c in
+                                 zip((entries, fine, groups), self.capacity))
+        if self.tree is not None:
+            self.tree.destroy()
+        vec = ti.types.vector(LANES, self.real)
+        fb = ti.FieldsBuilder()
+        tx, ty, mg, cg, chol = (ti.field(vec) for _ in range(5))
+        fb.dense(ti.i, entries).place(tx, ty)
+        fb.dense(ti.ij, (2, entries)).place(mg)
+        fb.dense(ti.ij, (_CG_ROWS, fine)).place(cg)
+        fb.dense(ti.ijk, (groups, COARSEST_CELLS, COARSEST_CELLS)).place(chol)
+        self.tree = fb.finalize()
+        self.ops, self.mg, self.cg, self.chol = LaneOps(tx, ty), mg, cg, chol
+        self.capacity = (entries, fine, groups)
+        return self
+
+
+_POOLS = {}
+
+
+def pool(real):
+    """The process's LanePool of float type ``real``."""
+    if real not in _POOLS:
+        _POOLS[real] = LanePool(real)
+    return _POOLS[real]
+
+
+# ---------------------------------------------------------------- copies
+@ti.func
+def _copy_in(op: ti.template(), cg: ti.template(), chol: ti.template(), geo: ti.template(),
+             lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
+             lchol: ti.template(), lgeo: ti.template(), R, g):
+    """Group g's operators of every level, Cholesky factors, right-hand side,
+    guess and search direction into the lanes, and its multigrid rows and other
+    CG rows cleared (the fields are shared: another solver's values may lie
+    where this one has the ghosts, which every sweep reads as 0); a lane past
+    the batch gets nothing to solve (zero operator, unit factor)."""
+    m = geo[geo.shape[0] - 1, _NX] * geo[geo.shape[0] - 1, _NY]
+    zero = ti.Vector([0.0] * LANES, dt=REAL.dtype)
+    for l in range(geo.shape[0]):
+        per = (geo[l, _NX] + 2) * (geo[l, _NY] + 1)
+        for c in range(lgeo[l, 0] + g * per, lgeo[l, 0] + (g + 1) * per):
+            lmg[_X, c] = zero
+            lmg[_B, c] = zero
+    per0 = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
+    for c in range(g * per0, (g + 1) * per0):
+        lcg[_ADIR, c] = zero
+        lcg[_PW, c] = zero
+    for q in range(LANES):
+        r = g * LANES + q
+        for l in range(geo.shape[0]):
+            per = (geo[l, _NX] + 2) * (geo[l, _NY] + 1)
+            src, dst = geo[l, 0] + r * per, lgeo[l, 0] + g * per
+            for c in range(per):
+                tx, ty = ti.cast(0.0, REAL.dtype), ti.cast(0.0, REAL.dtype)
+                if r < R:
+                    tx, ty = op[src + c][_TX], op[src + c][_TY]
+                _put(lops.tx, ti.Vector([dst + c]), q, tx)
+                _put(lops.ty, ti.Vector([dst + c]), q, ty)
+        per = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
+        src, dst = r * per, g * per
+        for c in range(per):
+            for row in ti.static((_SOL, _DIR, _RHS)):
+                v = ti.cast(0.0, REAL.dtype)
+                if r < R:
+                    v = cg[row, src + c]
+                _put(lcg, ti.Vector([row, dst + c]), q, v)
+        for a, b in ti.ndrange(m, m):
+            v = ti.select(a == b, ti.cast(1.0, REAL.dtype), ti.cast(0.0, REAL.dtype))
+            if r < R:
+                v = chol[r, a, b]
+            _put(lchol, ti.Vector([g, a, b]), q, v)
+
+
+@ti.func
+def _copy_out(cg: ti.template(), geo: ti.template(), lcg: ti.template(), R, g):
+    """Group g's solutions and search directions back to the ndarray."""
+    per = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
+    for q in range(LANES):
+        r = g * LANES + q
+        if r < R:
+            for c in range(per):
+                for row in ti.static((_SOL, _DIR)):
+                    cg[row, r * per + c] = _lane(lcg[row, g * per + c], q)
+
+
+# ---------------------------------------------------------------- the lanes' CG
+@ti.func
+def _lane_sum(a: ti.template(), ra, b: ti.template(), rb, lgeo: ti.template(), g):
+    """``sum a[ra] b[rb]`` of every lane in the order of the scalar solve's
+    segment sums and their total (:func:`._gmg_cg._segment_sum`, ``_total``)."""
+    nx, ny = lgeo[0, _NX], lgeo[0, _NY]
+    segments = _segments(ny)
+    total = ti.Vector([0.0] * LANES, dt=REAL.dtype)
+    for t in range(nx * segments):
+        _, i, j0, j1 = _segment(t, nx, ny, segments)
+        first = _index(lgeo, 0, g, i, 0)
+        s = ti.Vector([0.0] * LANES, dt=REAL.dtype)
+        for j in range(j0, j1):
+            s += a[ra, first + j] * b[rb, first + j]
+        total += s
+    return total
+
+
+@ti.func
+def _lane_product(cg: ti.template(), lcg: ti.template(), src, terms: ti.template(),
+                  geo: ti.template(), lgeo: ti.template(), consts: ti.template(), mask, R,
+                  g):
+    """``lcg[_PW] = S (H M) S^T lcg[src]`` of the lanes in ``mask``, lane by lane
+    on the ndarray's rows of its realization (the bodies' cells differ between
+    realizations): lcg[src] out to cg[src], :func:`_product_of`, cg[_PW] back.
+    The lane is a loop variable, not unrolled, so that the product is compiled
+    once (unrolled four times it tripled the kernel's compile time)."""
+    per = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
+    for q in range(LANES):
+        r = g * LANES + q
+        if _lane(mask, q) != 0 and r < R:
+            for c in range(per):
+                cg[src, r * per + c] = _lane(lcg[src, g * per + c], q)
+            _product_of(cg, src, _PW, terms, geo, consts, r)
+            for c in range(per):
+                _put(lcg, ti.Vector([_PW, g * per + c]), q, cg[_PW, r * per + c])
+
+
+@ti.func
+def _lane(v, q):
+    """Component q (a run-time index) of the lanes' vector v."""
+    out = v[0]
+    for p in ti.static(range(1, LANES)):
+        if q == p:
+            out = v[p]
+    return out
+
+
+@ti.func
+def _put(a: ti.template(), index, q, value):
+    """``a[index][q] = value``: lane q (a run-time index) of the vector at the
+    grouped ``index`` (a ti.Vector of indices) of field a."""
+    for p in ti.static(range(LANES)):
+        if q == p:
+            a[index][p] = value
+
+
+@ti.func
+def _any(mask):
+    n = 0
+    for q in ti.static(range(LANES)):
+        n += mask[q]
+    return n > 0
+
+
+@ti.func
+def _keep(mask, new, old):
+    """``new`` in the lanes of ``mask``, ``old`` in the others."""
+    return ti.select(mask != 0, new, old)
+
+
+@ti.func
+def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
+                lchol: ti.template(), lgeo: ti.template(), cg: ti.template(),
+                geo: ti.template(), state: ti.template(), flags: ti.template(),
+                consts: ti.template(), maxiter, bodies: ti.template(), terms: ti.template(),
+                R, g):
+    """The CG solve of group g's lanes (module docstring): the steps of
+    :func:`._gmg_cg._solve_one`, each lane's in its order."""
+    tol2 = consts[_K_TOL2]
+    nx, ny = lgeo[0, _NX], lgeo[0, _NY]
+    s = ny + 1
+    zero = ti.Vector([0.0] * LANES, dt=REAL.dtype)
+    active = ti.Vector([0] * LANES)
+    for q in ti.static(range(LANES)):
+        active[q] = ti.select(g * LANES + q < R, 1, 0)
+    iters = ti.Vector([0] * LANES)
+    bb = _lane_sum(lcg, _RHS, lcg, _RHS, lgeo, g)
+    undriven = ti.select(bb == 0, 1, 0)
+    for i in range(nx):
+        first = _index(lgeo, 0, g, i, 0)
+        for j in range(ny):
+            k = first + j
+            cleared = ti.select(_diagonal(lops, k, s) == 0, 1, undriven)
+            lcg[_SOL, k] = ti.select(cleared != 0, zero, lcg[_SOL, k])
+    rz, rr, alpha, beta, res = zero, zero, zero, zero, zero
+    running = ti.Vector([0] * LANES)
+    first_step = ti.Vector([0] * LANES)
+    pending = active        # lanes whose true residual decides what they do next
+    while _any(pending):
+        # r = b - A x of the pending lanes, and _after_check
+        if ti.static(bodies):
+            _lane_product(cg, lcg, _SOL, terms, geo, lgeo, consts, pending, R, g)
+        total = zero
+        segments = _segments(ny)
+        for t in range(nx * segments):
+            _, i, j0, j1 = _segment(t, nx, ny, segments)
+            first = _index(lgeo, 0, g, i, 0)
+            part = zero
+            for j in range(j0, j1):
+                k = first + j
+                b = lcg[_RHS, k] - _apply(lops, lcg, _SOL, k, s)
+                if ti.static(bodies):
+                    b = b - lcg[_PW, k]
+                b = _keep(pending, b, lmg[_B, k])
+                lmg[_B, k] = b
+                part += b * b
+            total += part
+        rr = _keep(pending, total, rr)
+        res2 = ti.select(bb > 0, rr / bb, zero)
+        res = _keep(pending, ti.sqrt(res2), res)
+        go = ti.select(res2 > tol2, 1, 0) * ti.select(iters < maxiter, 1, 0)
+        running = _keep(pending, go, running)
+        first_step = _keep(pending, 1, first_step)
+        pending = ti.Vector([0] * LANES)
+        while _any(running):
+            _cycle_of(lops, lmg, lchol, lgeo, g, 0, OVERCORRECTION)
+            rz_new = _lane_sum(lmg, _B, lmg, _X, lgeo, g)
+            beta = _keep(running, ti.select(first_step != 0, zero, rz_new / rz), beta)
+            rz = _keep(running, rz_new, rz)
+            first_step = _keep(running, 0, first_step)
+            for i in range(nx):
+                first = _index(lgeo, 0, g, i, 0)
+                for j in range(ny):
+                    k = first + j
+                    lcg[_DIR, k] = _keep(running, lmg[_X, k] + beta * lcg[_DIR, k],
+                                         lcg[_DIR, k])
+            if ti.static(bodies):
+                _lane_product(cg, lcg, _DIR, terms, geo, lgeo, consts, running, R, g)
+            curvature = zero
+            for t in range(nx * segments):
+                _, i, j0, j1 = _segment(t, nx, ny, segments)
+                first = _index(lgeo, 0, g, i, 0)
+                for j in range(j0, j1):
+                    k = first + j
+                    ad = _apply(lops, lcg, _DIR, k, s)
+                    if ti.static(bodies):
+                        ad = ad + lcg[_PW, k]
+                    lcg[_ADIR, k] = ad
+                part = zero
+                for j in range(j0, j1):
+                    part += lcg[_DIR, first + j] * lcg[_ADIR, first + j]
+                curvature += part
+            alpha = _keep(running, ti.select(curvature > 0, rz / curvature, zero), alpha)
+            total = zero
+            for t in range(nx * segments):
+                _, i, j0, j1 = _segment(t, nx, ny, segments)
+                first = _index(lgeo, 0, g, i, 0)
+                for j in range(j0, j1):
+                    k = first + j
+                    lcg[_SOL, k] = _keep(running, lcg[_SOL, k] + alpha * lcg[_DIR, k],
+                                         lcg[_SOL, k])
+                    lmg[_B, k] = _keep(running, lmg[_B, k] - alpha * lcg[_ADIR, k],
+                                       lmg[_B, k])
+                part = zero
+                for j in range(j0, j1):
+                    part += lmg[_B, first + j] * lmg[_B, first + j]
+                total += part
+            rr = _keep(running, total, rr)
+            iters += running
+            go = (ti.select(rr > tol2 * bb, 1, 0) * ti.select(iters < maxiter, 1, 0)
+                  * ti.select(alpha != 0, 1, 0))
+            pending = _keep(running, 1 - go, pending)
+            running = _keep(running, go, running)
+    for q in ti.static(range(LANES)):
+        r = g * LANES + q
+        if r < R:
+            state[r, _RZ] = rz[q]
+            state[r, _BB] = bb[q]
+            state[r, _RR] = rr[q]
+            state[r, _ALPHA] = alpha[q]
+            state[r, _BETA] = beta[q]
+            state[r, _RES] = res[q]
+            flags[r, _ITERS] = iters[q]
+            flags[r, _UNDRIVEN] = undriven[q]
+            flags[r, _RUNNING] = 0
+            flags[r, _CHECK] = 0
+            flags[r, _FIRST] = 1
+
+
+@ti.kernel
+def _solve_lanes(op: _Ops, cg: _Rows, state: _Rows, flags: _Ints, geo: _Ints, chol: _Chol,
+                 lgeo: _Ints, consts: _Consts, maxiter: ti.i32, bodies: ti.template(),
+                 terms: Terms, ltx: ti.template(), lty: ti.template(), lmg: ti.template(),
+                 lcg: ti.template(), lchol: ti.template()):
+    """The whole solve of every realization, a group of LANES per thread: copied
+    into the lanes, solved, copied back (module docstring)."""
+    R = flags.shape[0]
+    lops = ti.static(LaneOps(ltx, lty))
+    for t in range((R + LANES - 1) // LANES * _TASK):  # one group per thread (_TASK)
+        if t % _TASK == 0:
+            g = t // _TASK
+            _copy_in(op, cg, chol, geo, lops, lmg, lcg, lchol, lgeo, R, g)
+            _lane_solve(lops, lmg, lcg, lchol, lgeo, cg, geo, state, flags, consts, maxiter,
+                        bodies, terms, R, g)
+            _copy_out(cg, geo, lcg, R, g)
