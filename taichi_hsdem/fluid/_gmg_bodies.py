@@ -174,36 +174,73 @@ def _product_of(cg: ti.template(), src, dst, terms: ti.template(), geo: ti.templ
                 consts: ti.template(), r):
     """``cg[dst] = S (H M) S^T cg[src]`` of realization r, at every cell, serially
     (in the thread that runs the realization's whole solve)."""
-    dx, dy = consts[_K_DX], consts[_K_DY]
-    for o in range(terms.body.shape[1]):
-        _gather_body(cg, src, terms, geo, dx, dy, r, o)
-        _set_z(terms.body, r, o)
+    gathers_of(cg, src, terms, geo, consts, r)
     for i in range(geo[0, _NX]):
+        first = _index(geo, 0, r, i, 0)
         for j in range(geo[0, _NY]):
-            cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, terms, geo, dx, dy, r, i,
-                                                            j)
+            cg[dst, first + j] = 0.0
+    for o in range(terms.body.shape[1]):
+        _spread_box(cg, dst, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
+
+
+@ti.func
+def gathers_of(cg: ti.template(), src, terms: ti.template(), geo: ti.template(),
+               consts: ti.template(), r):
+    """``z = H M S^T cg[src]`` of every body of realization r, serially: the
+    first half of :func:`_product_of`, whose reads lie in the bodies' rings
+    (:func:`ring`)."""
+    for o in range(terms.body.shape[1]):
+        _gather_body(cg, src, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
+        _set_z(terms.body, r, o)
+
+
+@ti.func
+def ring(terms: ti.template(), geo: ti.template(), r, o):
+    """(i0, i1, j0, j1): body o's box of cells with the ring of cells around it,
+    cells i0 <= i < i1, j0 <= j < j1 (empty for a body that owns no cell). Every
+    cell where ``S z`` is not 0 lies in some body's (a face carries only between
+    cells of which one is owned), and so does every value the gather reads."""
+    nx, ny = geo[0, _NX], geo[0, _NY]
+    return ti.Vector([ti.max(terms.box[r, o, 0] - 1, 0), ti.min(terms.box[r, o, 1] + 2, nx),
+                      ti.max(terms.box[r, o, 2] - 1, 0), ti.min(terms.box[r, o, 3] + 2, ny)])
+
+
+@ti.func
+def _spread_box(cg: ti.template(), dst, terms: ti.template(), geo: ti.template(), dx, dy, r,
+                o):
+    """``cg[dst] = S z`` at the cells of body o's :func:`ring`; a cell in two
+    rings gets the same value twice (:func:`_spread_cell` sums all of its faces).
+    The rest of ``cg[dst]`` is 0, set beforehand."""
+    b = ring(terms, geo, r, o)
+    for i in range(b[0], b[1]):
+        for j in range(b[2], b[3]):
+            cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, terms, geo, dx, dy, r,
+                                                            i, j)
 
 
 @ti.func
 def _product(cg: ti.template(), src, dst, flags: ti.template(), running, terms: ti.template(),
              geo: ti.template(), consts: ti.template()):
     """``cg[dst] = S (H M) S^T cg[src]`` of every running realization (flag
-    ``running`` of ``flags``), in two top-level loops: a thread per body, then a
-    thread per grid column. Each body's sum runs over its own cells in cell order and
-    each cell's over its four faces, so the bits are those of :func:`_product_of`."""
+    ``running`` of ``flags``), in three top-level loops: a thread per body (the
+    gather), per grid column (``cg[dst] = 0``), per body (:func:`_spread_box`).
+    Each body's sum runs over its own cells in cell order and each cell's over its
+    four faces, so the bits are those of :func:`_product_of`."""
     R, N = terms.body.shape[0], terms.body.shape[1]
     for r, o in ti.ndrange(R, N):
         if flags[r, running]:
             _gather_body(cg, src, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
             _set_z(terms.body, r, o)
     nx, ny = geo[0, _NX], geo[0, _NY]
-    for t in range(R * nx):  # a thread per grid column: a third faster than per cell
+    for t in range(R * nx):  # a thread per grid column
         r, i = t // nx, t % nx
         if flags[r, running]:
-            dx, dy = consts[_K_DX], consts[_K_DY]
+            first = _index(geo, 0, r, i, 0)
             for j in range(ny):
-                cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, terms, geo, dx, dy,
-                                                                r, i, j)
+                cg[dst, first + j] = 0.0
+    for r, o in ti.ndrange(R, N):  # a cell in two bodies' boxes gets one value twice
+        if flags[r, running]:
+            _spread_box(cg, dst, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
 
 
 @ti.kernel

@@ -24,25 +24,44 @@ Float64 only; float32 solves keep the scalar way. Package-internal."""
 import numpy as np
 
 from ..backend import ti
-from ._gmg_bodies import Terms, _product_of
+from ._gmg_bodies import Terms, _spread_box, gathers_of, ring
 from ._gmg_cycle import (COARSEST_CELLS, LANES, OVERCORRECTION, REAL, _ADIR, _ALPHA, _B,
                          _BB, _BETA, _CHECK, _Chol, _Consts, _DIR, _FIRST, _ITERS, _Ints,
-                         _K_TOL2, _NX, _NY, _Ops, _PW, _RES, _RHS, _RR, _RUNNING, _RZ, _Rows,
-                         _SOL, _TASK, _TX, _TY, _UNDRIVEN, _X, LaneOps, _apply, _cycle_of,
-                         _diagonal, _index, _segment, _segments)
+                         _K_DX, _K_DY, _K_TOL2, _NX, _NY, _Ops, _PW, _RES, _RHS, _RR,
+                         _RUNNING, _RZ, _Rows, _SOL, _TASK, _TX, _TY, _UNDRIVEN, _X, LaneOps,
+                         _apply, _cycle_of, _diagonal, _index, _segment, _segments)
 
 #: Rows of the lanes' CG field: those of the ndarray up to the bodies' term.
 _CG_ROWS = _PW + 1
 
 
-def lane_geo(levels, n_batch):
-    """The level table (offset, nx, ny) of the lanes' fields: a group of LANES
-    realizations where the ndarrays have one realization."""
-    groups = -(-n_batch // LANES)
-    sizes = [groups * (nx + 2) * (ny + 1) for nx, ny in levels]
-    offsets = np.concatenate([[0], np.cumsum(sizes)])
-    return (np.array([[offsets[l], nx, ny] for l, (nx, ny) in enumerate(levels)],
-                     dtype=np.int32), int(offsets[-1]), int(sizes[0]), groups)
+def _upload(array, dtype, element=None):
+    """A device copy of a numpy array (``element``: a vector type for the last axis)."""
+    array = np.ascontiguousarray(array)
+    shape = array.shape[:-1] if element is not None else array.shape
+    out = ti.ndarray(element if element is not None else dtype, shape)
+    out.from_numpy(array.astype({ti.f64: np.float64, ti.f32: np.float32, ti.i32: np.int32,
+                                 ti.i8: np.int8}[dtype]))
+    return out
+
+
+class Lanes:
+    """The lanes of one solver: its level table in groups of LANES realizations
+    (where the ndarrays' table has one realization) and the process's fields."""
+
+    def __init__(self, levels, n_batch, real):
+        groups = -(-n_batch // LANES)
+        sizes = [groups * (nx + 2) * (ny + 1) for nx, ny in levels]
+        offsets = np.concatenate([[0], np.cumsum(sizes)])
+        self.geo = _upload(np.array([[offsets[l], nx, ny] for l, (nx, ny) in
+                                     enumerate(levels)]), ti.i32)
+        self.pool = pool(real).fit(int(offsets[-1]), int(sizes[0]), groups)
+
+    def solve(self, op, cg, state, flags, geo, chol, consts, maxiter, body):
+        """The whole solve of every realization (:func:`_solve_lanes`)."""
+        p = self.pool
+        _solve_lanes(op, cg, state, flags, geo, chol, self.geo, consts, maxiter, *body,
+                     p.ops.tx, p.ops.ty, p.mg, p.cg, p.chol)
 
 
 class LanePool:
@@ -173,19 +192,32 @@ def _lane_product(cg: ti.template(), lcg: ti.template(), src, terms: ti.template
                   geo: ti.template(), lgeo: ti.template(), consts: ti.template(), mask, R,
                   g):
     """``lcg[_PW] = S (H M) S^T lcg[src]`` of the lanes in ``mask``, lane by lane
-    on the ndarray's rows of its realization (the bodies' cells differ between
-    realizations): lcg[src] out to cg[src], :func:`_product_of`, cg[_PW] back.
-    The lane is a loop variable, not unrolled, so that the product is compiled
-    once (unrolled four times it tripled the kernel's compile time)."""
+    (the bodies' cells differ between realizations) on the ndarray's rows of its
+    realization, as :func:`._gmg_bodies._product_of` with the same bits: lcg[src]
+    out to cg[src] and ``S z`` back in the bodies' rings only (every value the
+    product reads or makes lies there; elsewhere it is 0). The lane is a loop
+    variable, not unrolled, so that the product is compiled once (unrolled four
+    times it tripled the kernel's compile time)."""
+    zero = ti.Vector([0.0] * LANES, dt=REAL.dtype)
     per = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
+    for c in range(g * per, (g + 1) * per):
+        lcg[_PW, c] = zero
     for q in range(LANES):
         r = g * LANES + q
         if _lane(mask, q) != 0 and r < R:
-            for c in range(per):
-                cg[src, r * per + c] = _lane(lcg[src, g * per + c], q)
-            _product_of(cg, src, _PW, terms, geo, consts, r)
-            for c in range(per):
-                _put(lcg, ti.Vector([_PW, g * per + c]), q, cg[_PW, r * per + c])
+            for o in range(terms.body.shape[1]):
+                b = ring(terms, geo, r, o)
+                for i, j in ti.ndrange((b[0], b[1]), (b[2], b[3])):
+                    cg[src, _index(geo, 0, r, i, j)] = _lane(lcg[src, _index(lgeo, 0, g, i, j)],
+                                                             q)
+            gathers_of(cg, src, terms, geo, consts, r)
+            for o in range(terms.body.shape[1]):
+                _spread_box(cg, _PW, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
+            for o in range(terms.body.shape[1]):
+                b = ring(terms, geo, r, o)
+                for i, j in ti.ndrange((b[0], b[1]), (b[2], b[3])):
+                    _put(lcg, ti.Vector([_PW, _index(lgeo, 0, g, i, j)]), q,
+                         cg[_PW, _index(geo, 0, r, i, j)])
 
 
 @ti.func

@@ -76,6 +76,11 @@ the blocks.
 ``cells``: in parallel over cells (the default on every GPU). Dot products are
 summed the same way in all three, and the three give the same bits.
 
+*Realizations side by side.* A CPU float64 batch solved the ``realizations`` way
+runs 4 realizations per thread, each cell's four values one vector in Taichi
+fields, which the compiler vectorizes (:mod:`._gmg_lanes`): twice the solves per
+second, the bits of one realization per thread (``lanes = False``: off).
+
 *Host reads.* One per solve: the report (_gmg_cg._report) after the CG. On a GPU
 the CG runs as many iterations as the last solve took before that read, then a
 quarter as many at a time (_iterate); the permeability scan is read with the
@@ -113,8 +118,7 @@ from ._gmg_cycle import (CG_ROWS, COARSEST_CELLS, MAXITER, N_CONSTS, N_FLAGS, RE
                          _K_DX, _K_DY, _K_GX, _K_GY, _K_INFLOW, _K_PREF, _K_TOL2, _KEEP,
                          _PARALLEL, _RES, _SOL, _SEGMENT, _SIDE_NAMES, _ZEROS, _restrict,
                          _serial_cycle, _smooth, _smooth_blocks, vec2)
-from ._gmg_lanes import _solve_lanes, lane_geo
-from ._gmg_lanes import pool as lane_pool
+from ._gmg_lanes import Lanes, _upload
 from ._gmg_setup import (_assemble, _coarsen, _copy_rhs, _factor, _load_guess, _scan,
                          _set_carried_rhs)
 
@@ -327,9 +331,7 @@ class TaichiPressureSolver:
         self._geo = _upload(geo, ti.i32)
         real = self.real
         self._op = ti.ndarray(vec2(real), (int(offsets[-1]),))
-        # Realizations side by side (._gmg_lanes): a batch solved one realization
-        # per thread on the CPU in float64, whose lanes vectorize; their own
-        # multigrid rows replace these
+        # realizations side by side (module doc): their own rows replace these
         lanes = (self.lanes and self.parallel == "realizations" and R > 1
                  and real == ti.f64 and not backend.on_gpu())
         self._mg = ti.ndarray(real, (2, 1 if lanes else int(offsets[-1])))
@@ -366,11 +368,7 @@ class TaichiPressureSolver:
                                 box=_upload(np.full((1, 1, 4), -1), ti.i32))
         self._bodies = None                        # those of the solve under way
         self._terms = None   # their pack (Terms), kept while the same arrays come
-        self._lanes = None
-        if lanes:
-            table, entries, fine_lanes, groups = lane_geo(levels, R)
-            self._lane_geo = _upload(table, ti.i32)
-            self._lanes = lane_pool(real).fit(entries, fine_lanes, groups)
+        self._lanes = Lanes(levels, R, real) if lanes else None
 
     # ------------------------------------------------------------------ public
     def solve(self, kappa, x0=None, carried=None, occupied=None, *, host=True, bodies=None):
@@ -605,10 +603,8 @@ class TaichiPressureSolver:
         maxiter = int(MAXITER)
         body = self._body_args()
         if self._lanes is not None:
-            lanes = self._lanes
-            _solve_lanes(self._op, self._cg, self._state, self._flags, self._geo, self._chol,
-                         self._lane_geo, self._consts, maxiter, *body, lanes.ops.tx,
-                         lanes.ops.ty, lanes.mg, lanes.cg, lanes.chol)
+            self._lanes.solve(self._op, self._cg, self._state, self._flags, self._geo,
+                              self._chol, self._consts, maxiter, body)
             return self._read_report(k_dev)
         if self.parallel == "realizations":
             _solve_each(*arrays, self._chol, self._consts, maxiter, *body)
@@ -702,12 +698,3 @@ class TaichiPressureSolver:
         the slowest realization of each)."""
         return dict(self._stats)
 
-
-def _upload(array, dtype, element=None):
-    """A device copy of a numpy array (``element``: a vector type for the last axis)."""
-    array = np.ascontiguousarray(array)
-    shape = array.shape[:-1] if element is not None else array.shape
-    out = ti.ndarray(element if element is not None else dtype, shape)
-    out.from_numpy(array.astype({ti.f64: np.float64, ti.f32: np.float32, ti.i32: np.int32,
-                                 ti.i8: np.int8}[dtype]))
-    return out
