@@ -25,7 +25,8 @@ from dataclasses import dataclass
 WALL_NODE_BYTES = 64             # wall level set: points, distance, gradient, device copy
 LEVEL_SET_NODE_BYTES = 80        # a template's grid: points, distance, gradient, stacked copy
 FLUID_CELL_BYTES = 100           # the fluid grid itself: active mask, faces, sparsity pattern
-FLUID_CELL_REALIZATION_BYTES = 320   # per realization: matrix, multigrid hierarchy, fields
+FLUID_CELL_REALIZATION_BYTES = 400   # per realization: matrix, multigrid hierarchy, fields
+#                                      (the lanes' copies, fluid/_gmg_lanes.py, included)
 BODY_BYTES = 400                 # per body and realization: state, neighbours, host copies
 HISTORY_SLOT_BYTES = 2 * (4 + 16)    # shear history: two buffers of (partner, 2-vector)
 

@@ -55,12 +55,17 @@ def test_seed_alone_reproduces_its_realization(batch_result, k):
                                       err_msg=key)
 
 
-def test_flow_rate_inlet_batch_and_alone_give_the_same_bits():
+@pytest.mark.parametrize("lanes", ["auto", True])
+def test_flow_rate_inlet_batch_and_alone_give_the_same_bits(lanes, monkeypatch):
     """With a flow-rate inlet the inflow is shared among the inlet cells by their
     permeability: those shares must be summed in the same order in a batch as
     alone (a batch's columns come out Fortran-ordered). The first pressure solve
     and the positions after 0.05 s (about 1850 steps, 6 solves) of vani's
-    realization 1, in a batch of two and alone."""
+    realization 1, in a batch of two and alone; and with the batch's two solved
+    side by side in one group's lanes (fluid/_gmg_lanes.py), the moving bodies'
+    term included."""
+    from taichi_hsdem.fluid.gmg import TaichiPressureSolver
+    monkeypatch.setattr(TaichiPressureSolver, "lanes", lanes)
     vani = HOURGLASS.parent / "vani_phi026.toml"
 
     def run(seed, realizations):

@@ -174,11 +174,19 @@ def test_a_realization_alone_gives_the_bits_it_gets_in_a_batch(parallel):
             np.testing.assert_array_equal(info.flux_out[r], info_r.flux_out[0])
 
 
-def test_a_batch_runs_its_realizations_side_by_side_only_where_they_vectorize():
+def test_a_batch_runs_its_realizations_side_by_side_only_where_they_vectorize(monkeypatch):
     """The lanes (_gmg_lanes) take a CPU batch of float64 solved one realization per
-    thread; a realization alone, the rows and cells ways and float32 keep one
-    realization per thread (so the bit tests around here compare the two)."""
+    thread where it fills the lanes (on 2 threads: 8, 16, 20, 100 realizations;
+    not 4, 10, 12); a realization alone, the rows and cells ways and float32 keep
+    one realization per thread (so the bit tests around here compare the two)."""
+    from taichi_hsdem import limits
+    monkeypatch.setattr(limits, "thread_share", lambda: 2)
     active = np.ones((20, 12), bool)
+    for n, used in ((8, True), (16, True), (20, True), (100, True), (4, False), (10, False),
+                    (12, False)):
+        solver = TaichiPressureSolver(active, 1.0, 1.0, 1.0, FLOW, n_batch=n, gap=0.5)
+        assert (solver._lanes is not None) == used, n
+    monkeypatch.setattr(TaichiPressureSolver, "lanes", True)
     assert TaichiPressureSolver(active, 1.0, 1.0, 1.0, FLOW, n_batch=5, gap=0.5)._lanes
     for extra in ({"n_batch": 1}, {"n_batch": 5, "parallel": "rows"},
                   {"n_batch": 5, "parallel": "cells"}, {"n_batch": 5, "real": "f32"}):

@@ -23,6 +23,7 @@ Float64 only; float32 solves keep the scalar way. Package-internal."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 import numpy as np
 
+from .. import limits
 from ..backend import ti
 from ._gmg_bodies import Terms, _spread_box, gathers_of, ring
 from ._gmg_cycle import (COARSEST_CELLS, LANES, OVERCORRECTION, REAL, _ADIR, _ALPHA, _B,
@@ -31,8 +32,11 @@ from ._gmg_cycle import (COARSEST_CELLS, LANES, OVERCORRECTION, REAL, _ADIR, _AL
                          _RUNNING, _RZ, _Rows, _SOL, _TASK, _TX, _TY, _UNDRIVEN, _X, LaneOps,
                          _apply, _cycle_of, _diagonal, _index, _segment, _segments)
 
-#: Rows of the lanes' CG field: those of the ndarray up to the bodies' term.
-_CG_ROWS = _PW + 1
+#: Rows of the lanes' CG field: the ndarray's solution, direction, A times it and
+#: right-hand side, then the bodies' term in row _LPW (the ndarray's _BASE, which
+#: the solve does not read, is left out).
+_LPW = 4
+_CG_ROWS = 5
 
 
 def _upload(array, dtype, element=None):
@@ -45,12 +49,36 @@ def _upload(array, dtype, element=None):
     return out
 
 
+def group_count(n_batch):
+    """How many groups ``n_batch`` realizations are solved in: as many as it takes,
+    rounded up to a multiple of the threads (at most one realization a group),
+    so that each thread has as many lanes' bodies' terms to apply (lane by lane):
+    16 realizations on 2 threads are 4 groups of 4, 20 are 6 of 4 or 3 (lane q of
+    group g holds realization q G + g)."""
+    threads = limits.thread_share() or limits.usable_cpus()
+    return int(min(n_batch, -(-(-(-n_batch // LANES)) // threads) * threads))
+
+
+def lanes_pay(n_batch, lanes="auto"):
+    """Whether ``n_batch`` realizations are solved side by side: always (``lanes``
+    True), never (False), or ("auto") where they fill at least 0.8 of their
+    groups' lanes. On 2 threads (vani's grid, moving
+    bodies, tools/profile_case.py-like runs of 0.3 s): 8 and 16 realizations in
+    full groups took 0.8 of the time of one per thread, 4 (two groups of 2) 1.1
+    times, 10 (groups of 3, 3, 2, 2) as long; the bodies' term, lane by lane, is
+    what does not shrink."""
+    if lanes != "auto":
+        return bool(lanes)
+    return n_batch >= 0.8 * LANES * group_count(n_batch)
+
+
 class Lanes:
-    """The lanes of one solver: its level table in groups of LANES realizations
-    (where the ndarrays' table has one realization) and the process's fields."""
+    """The lanes of one solver: its groups of at most LANES realizations, their
+    level table (where the ndarrays' table has one realization) and the
+    process's fields."""
 
     def __init__(self, levels, n_batch, real):
-        groups = -(-n_batch // LANES)
+        self.groups = groups = group_count(n_batch)
         sizes = [groups * (nx + 2) * (ny + 1) for nx, ny in levels]
         offsets = np.concatenate([[0], np.cumsum(sizes)])
         self.geo = _upload(np.array([[offsets[l], nx, ny] for l, (nx, ny) in
@@ -60,8 +88,8 @@ class Lanes:
     def solve(self, op, cg, state, flags, geo, chol, consts, maxiter, body):
         """The whole solve of every realization (:func:`_solve_lanes`)."""
         p = self.pool
-        _solve_lanes(op, cg, state, flags, geo, chol, self.geo, consts, maxiter, *body,
-                     p.ops.tx, p.ops.ty, p.mg, p.cg, p.chol)
+        _solve_lanes(op, cg, state, flags, geo, chol, self.geo, self.groups, consts, maxiter,
+                     *body, p.ops.tx, p.ops.ty, p.mg, p.cg, p.chol)
 
 
 class LanePool:
@@ -81,9 +109,10 @@ class LanePool:
         finest and the Cholesky factors of ``groups`` groups."""
         if all(n <= c for n, c in zip((entries, fine, groups), self.capacity)):
             return self
-        # powers of two, so that few sizes occur: a kernel is compiled for each
-        # (Taichi's offline cache keeps it across runs, keyed by the sizes)
-        entries, fine, groups = (1 << (max(n, c) - 1).bit_length() for n, c in
+        # on a ladder of 2^(k/4), so that few sizes occur (a kernel is compiled
+        # for each; Taichi's offline cache keeps it across runs, keyed by the
+        # sizes) and at most a fifth is never used
+        entries, fine, groups = (_ladder(max(n, c)) for n, c in
                                  zip((entries, fine, groups), self.capacity))
         if self.tree is not None:
             self.tree.destroy()
@@ -100,6 +129,14 @@ class LanePool:
         return self
 
 
+def _ladder(n):
+    """The least 2^(k/4), rounded up to an integer, that is at least n."""
+    k = max(0, int(np.ceil(4 * np.log2(max(n, 1)) - 1e-9)))
+    while int(np.ceil(2.0 ** (k / 4))) < n:
+        k += 1
+    return int(np.ceil(2.0 ** (k / 4)))
+
+
 _POOLS = {}
 
 
@@ -114,7 +151,7 @@ def pool(real):
 @ti.func
 def _copy_in(op: ti.template(), cg: ti.template(), chol: ti.template(), geo: ti.template(),
              lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
-             lchol: ti.template(), lgeo: ti.template(), R, g):
+             lchol: ti.template(), lgeo: ti.template(), R, G, g):
     """Group g's operators of every level, Cholesky factors, right-hand side,
     guess and search direction into the lanes, and its multigrid rows and other
     CG rows cleared (the fields are shared: another solver's values may lie
@@ -130,9 +167,9 @@ def _copy_in(op: ti.template(), cg: ti.template(), chol: ti.template(), geo: ti.
     per0 = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
     for c in range(g * per0, (g + 1) * per0):
         lcg[_ADIR, c] = zero
-        lcg[_PW, c] = zero
+        lcg[_LPW, c] = zero
     for q in range(LANES):
-        r = g * LANES + q
+        r = q * G + g
         for l in range(geo.shape[0]):
             per = (geo[l, _NX] + 2) * (geo[l, _NY] + 1)
             src, dst = geo[l, 0] + r * per, lgeo[l, 0] + g * per
@@ -158,11 +195,11 @@ def _copy_in(op: ti.template(), cg: ti.template(), chol: ti.template(), geo: ti.
 
 
 @ti.func
-def _copy_out(cg: ti.template(), geo: ti.template(), lcg: ti.template(), R, g):
+def _copy_out(cg: ti.template(), geo: ti.template(), lcg: ti.template(), R, G, g):
     """Group g's solutions and search directions back to the ndarray."""
     per = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
     for q in range(LANES):
-        r = g * LANES + q
+        r = q * G + g
         if r < R:
             for c in range(per):
                 for row in ti.static((_SOL, _DIR)):
@@ -190,8 +227,8 @@ def _lane_sum(a: ti.template(), ra, b: ti.template(), rb, lgeo: ti.template(), g
 @ti.func
 def _lane_product(cg: ti.template(), lcg: ti.template(), src, terms: ti.template(),
                   geo: ti.template(), lgeo: ti.template(), consts: ti.template(), mask, R,
-                  g):
-    """``lcg[_PW] = S (H M) S^T lcg[src]`` of the lanes in ``mask``, lane by lane
+                  G, g):
+    """``lcg[_LPW] = S (H M) S^T lcg[src]`` of the lanes in ``mask``, lane by lane
     (the bodies' cells differ between realizations) on the ndarray's rows of its
     realization, as :func:`._gmg_bodies._product_of` with the same bits: lcg[src]
     out to cg[src] and ``S z`` back in the bodies' rings only (every value the
@@ -201,9 +238,9 @@ def _lane_product(cg: ti.template(), lcg: ti.template(), src, terms: ti.template
     zero = ti.Vector([0.0] * LANES, dt=REAL.dtype)
     per = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
     for c in range(g * per, (g + 1) * per):
-        lcg[_PW, c] = zero
+        lcg[_LPW, c] = zero
     for q in range(LANES):
-        r = g * LANES + q
+        r = q * G + g
         if _lane(mask, q) != 0 and r < R:
             for o in range(terms.body.shape[1]):
                 b = ring(terms, geo, r, o)
@@ -216,7 +253,7 @@ def _lane_product(cg: ti.template(), lcg: ti.template(), src, terms: ti.template
             for o in range(terms.body.shape[1]):
                 b = ring(terms, geo, r, o)
                 for i, j in ti.ndrange((b[0], b[1]), (b[2], b[3])):
-                    _put(lcg, ti.Vector([_PW, _index(lgeo, 0, g, i, j)]), q,
+                    _put(lcg, ti.Vector([_LPW, _index(lgeo, 0, g, i, j)]), q,
                          cg[_PW, _index(geo, 0, r, i, j)])
 
 
@@ -258,7 +295,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
                 lchol: ti.template(), lgeo: ti.template(), cg: ti.template(),
                 geo: ti.template(), state: ti.template(), flags: ti.template(),
                 consts: ti.template(), maxiter, bodies: ti.template(), terms: ti.template(),
-                R, g):
+                R, G, g):
     """The CG solve of group g's lanes (module docstring): the steps of
     :func:`._gmg_cg._solve_one`, each lane's in its order."""
     tol2 = consts[_K_TOL2]
@@ -267,7 +304,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
     zero = ti.Vector([0.0] * LANES, dt=REAL.dtype)
     active = ti.Vector([0] * LANES)
     for q in ti.static(range(LANES)):
-        active[q] = ti.select(g * LANES + q < R, 1, 0)
+        active[q] = ti.select(q * G + g < R, 1, 0)
     iters = ti.Vector([0] * LANES)
     bb = _lane_sum(lcg, _RHS, lcg, _RHS, lgeo, g)
     undriven = ti.select(bb == 0, 1, 0)
@@ -284,7 +321,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
     while _any(pending):
         # r = b - A x of the pending lanes, and _after_check
         if ti.static(bodies):
-            _lane_product(cg, lcg, _SOL, terms, geo, lgeo, consts, pending, R, g)
+            _lane_product(cg, lcg, _SOL, terms, geo, lgeo, consts, pending, R, G, g)
         total = zero
         segments = _segments(ny)
         for t in range(nx * segments):
@@ -295,7 +332,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
                 k = first + j
                 b = lcg[_RHS, k] - _apply(lops, lcg, _SOL, k, s)
                 if ti.static(bodies):
-                    b = b - lcg[_PW, k]
+                    b = b - lcg[_LPW, k]
                 b = _keep(pending, b, lmg[_B, k])
                 lmg[_B, k] = b
                 part += b * b
@@ -320,7 +357,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
                     lcg[_DIR, k] = _keep(running, lmg[_X, k] + beta * lcg[_DIR, k],
                                          lcg[_DIR, k])
             if ti.static(bodies):
-                _lane_product(cg, lcg, _DIR, terms, geo, lgeo, consts, running, R, g)
+                _lane_product(cg, lcg, _DIR, terms, geo, lgeo, consts, running, R, G, g)
             curvature = zero
             for t in range(nx * segments):
                 _, i, j0, j1 = _segment(t, nx, ny, segments)
@@ -329,7 +366,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
                     k = first + j
                     ad = _apply(lops, lcg, _DIR, k, s)
                     if ti.static(bodies):
-                        ad = ad + lcg[_PW, k]
+                        ad = ad + lcg[_LPW, k]
                     lcg[_ADIR, k] = ad
                 part = zero
                 for j in range(j0, j1):
@@ -357,7 +394,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
             pending = _keep(running, 1 - go, pending)
             running = _keep(running, go, running)
     for q in ti.static(range(LANES)):
-        r = g * LANES + q
+        r = q * G + g
         if r < R:
             state[r, _RZ] = rz[q]
             state[r, _BB] = bb[q]
@@ -374,17 +411,17 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
 
 @ti.kernel
 def _solve_lanes(op: _Ops, cg: _Rows, state: _Rows, flags: _Ints, geo: _Ints, chol: _Chol,
-                 lgeo: _Ints, consts: _Consts, maxiter: ti.i32, bodies: ti.template(),
-                 terms: Terms, ltx: ti.template(), lty: ti.template(), lmg: ti.template(),
-                 lcg: ti.template(), lchol: ti.template()):
+                 lgeo: _Ints, G: ti.i32, consts: _Consts, maxiter: ti.i32,
+                 bodies: ti.template(), terms: Terms, ltx: ti.template(), lty: ti.template(),
+                 lmg: ti.template(), lcg: ti.template(), lchol: ti.template()):
     """The whole solve of every realization, a group of LANES per thread: copied
     into the lanes, solved, copied back (module docstring)."""
     R = flags.shape[0]
     lops = ti.static(LaneOps(ltx, lty))
-    for t in range((R + LANES - 1) // LANES * _TASK):  # one group per thread (_TASK)
+    for t in range(G * _TASK):  # one group per thread (_TASK)
         if t % _TASK == 0:
             g = t // _TASK
-            _copy_in(op, cg, chol, geo, lops, lmg, lcg, lchol, lgeo, R, g)
+            _copy_in(op, cg, chol, geo, lops, lmg, lcg, lchol, lgeo, R, G, g)
             _lane_solve(lops, lmg, lcg, lchol, lgeo, cg, geo, state, flags, consts, maxiter,
-                        bodies, terms, R, g)
-            _copy_out(cg, geo, lcg, R, g)
+                        bodies, terms, R, G, g)
+            _copy_out(cg, geo, lcg, R, G, g)

@@ -118,7 +118,7 @@ from ._gmg_cycle import (CG_ROWS, COARSEST_CELLS, MAXITER, N_CONSTS, N_FLAGS, RE
                          _K_DX, _K_DY, _K_GX, _K_GY, _K_INFLOW, _K_PREF, _K_TOL2, _KEEP,
                          _PARALLEL, _RES, _SOL, _SEGMENT, _SIDE_NAMES, _ZEROS, _restrict,
                          _serial_cycle, _smooth, _smooth_blocks, vec2)
-from ._gmg_lanes import Lanes, _upload
+from ._gmg_lanes import Lanes, _upload, lanes_pay
 from ._gmg_setup import (_assemble, _coarsen, _copy_rhs, _factor, _load_guess, _scan,
                          _set_carried_rhs)
 
@@ -332,8 +332,8 @@ class TaichiPressureSolver:
         real = self.real
         self._op = ti.ndarray(vec2(real), (int(offsets[-1]),))
         # realizations side by side (module doc): their own rows replace these
-        lanes = (self.lanes and self.parallel == "realizations" and R > 1
-                 and real == ti.f64 and not backend.on_gpu())
+        lanes = (self.parallel == "realizations" and real == ti.f64 and R > 1
+                 and not backend.on_gpu() and lanes_pay(R, self.lanes))
         self._mg = ti.ndarray(real, (2, 1 if lanes else int(offsets[-1])))
         self._cg = ti.ndarray(real, (CG_ROWS, fine))
         segments = (ny + _SEGMENT - 1) // _SEGMENT
@@ -632,8 +632,9 @@ class TaichiPressureSolver:
     unread_iterations = True
 
     #: Whether a batch solved one realization per thread runs its realizations
-    #: side by side (._gmg_lanes; False: one per thread; the same bits).
-    lanes = True
+    #: side by side (._gmg_lanes.lanes_pay; "auto": where they fill the lanes,
+    #: True: always, False: never; the same bits).
+    lanes = "auto"
 
     def _read_report(self, k_dev):
         _boundary_fluxes(k_dev, self._cg, self._unknown, self._sides_dev, self._state,
