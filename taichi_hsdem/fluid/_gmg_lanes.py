@@ -216,12 +216,17 @@ def _lane_sum(a: ti.template(), ra, b: ti.template(), rb, lgeo: ti.template(), g
     total = ti.Vector([0.0] * LANES, dt=REAL.dtype)
     for t in range(nx * segments):
         _, i, j0, j1 = _segment(t, nx, ny, segments)
-        first = _index(lgeo, 0, g, i, 0)
-        s = ti.Vector([0.0] * LANES, dt=REAL.dtype)
-        for j in range(j0, j1):
-            s += a[ra, first + j] * b[rb, first + j]
-        total += s
+        total += _part(a, ra, b, rb, _index(lgeo, 0, g, i, 0), j0, j1)
     return total
+
+
+@ti.func
+def _part(a: ti.template(), ra, b: ti.template(), rb, first, j0, j1):
+    """One segment's ``sum a[ra] b[rb]``, cells first + j0 .. first + j1 - 1."""
+    part = ti.Vector([0.0] * LANES, dt=REAL.dtype)
+    for j in range(j0, j1):
+        part += a[ra, first + j] * b[rb, first + j]
+    return part
 
 
 @ti.func
@@ -290,6 +295,52 @@ def _keep(mask, new, old):
     return ti.select(mask != 0, new, old)
 
 
+# Per-cell steps of the lanes' CG, in the order of the scalar solve's
+# (_gmg_cg._residual_b, _matvec_b, _update); ``mask``: the lanes they change,
+# ``coef``: the step's coefficient (alpha), ``bodies``: whether row _LPW applies.
+@ti.func
+def _residual(lops: ti.template(), lmg: ti.template(), lcg: ti.template(), k, s, mask,
+              coef, bodies: ti.template()):
+    b = lcg[_RHS, k] - _apply(lops, lcg, _SOL, k, s)
+    if ti.static(bodies):
+        b = b - lcg[_LPW, k]
+    lmg[_B, k] = _keep(mask, b, lmg[_B, k])
+
+
+@ti.func
+def _matvec(lops: ti.template(), lmg: ti.template(), lcg: ti.template(), k, s, mask, coef,
+            bodies: ti.template()):
+    ad = _apply(lops, lcg, _DIR, k, s)
+    if ti.static(bodies):
+        ad = ad + lcg[_LPW, k]
+    lcg[_ADIR, k] = ad
+
+
+@ti.func
+def _update(lops: ti.template(), lmg: ti.template(), lcg: ti.template(), k, s, mask, coef,
+            bodies: ti.template()):
+    lcg[_SOL, k] = _keep(mask, lcg[_SOL, k] + coef * lcg[_DIR, k], lcg[_SOL, k])
+    lmg[_B, k] = _keep(mask, lmg[_B, k] - coef * lcg[_ADIR, k], lmg[_B, k])
+
+
+@ti.func
+def _cells_and_sum(step: ti.template(), lops: ti.template(), lmg: ti.template(),
+                   lcg: ti.template(), lgeo: ti.template(), g, mask, coef,
+                   bodies: ti.template(), a: ti.template(), ra, b: ti.template(), rb):
+    """``step`` at every fine cell of group g, then ``sum a[ra] b[rb]`` of every lane,
+    segment by segment as the scalar solve's _for_cells_and_sum_of and its total."""
+    nx, ny = lgeo[0, _NX], lgeo[0, _NY]
+    segments = _segments(ny)
+    total = ti.Vector([0.0] * LANES, dt=REAL.dtype)
+    for t in range(nx * segments):
+        _, i, j0, j1 = _segment(t, nx, ny, segments)
+        first = _index(lgeo, 0, g, i, 0)
+        for j in range(j0, j1):
+            step(lops, lmg, lcg, first + j, ny + 1, mask, coef, bodies)
+        total += _part(a, ra, b, rb, first, j0, j1)
+    return total
+
+
 @ti.func
 def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
                 lchol: ti.template(), lgeo: ti.template(), cg: ti.template(),
@@ -322,21 +373,8 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
         # r = b - A x of the pending lanes, and _after_check
         if ti.static(bodies):
             _lane_product(cg, lcg, _SOL, terms, geo, lgeo, consts, pending, R, G, g)
-        total = zero
-        segments = _segments(ny)
-        for t in range(nx * segments):
-            _, i, j0, j1 = _segment(t, nx, ny, segments)
-            first = _index(lgeo, 0, g, i, 0)
-            part = zero
-            for j in range(j0, j1):
-                k = first + j
-                b = lcg[_RHS, k] - _apply(lops, lcg, _SOL, k, s)
-                if ti.static(bodies):
-                    b = b - lcg[_LPW, k]
-                b = _keep(pending, b, lmg[_B, k])
-                lmg[_B, k] = b
-                part += b * b
-            total += part
+        total = _cells_and_sum(_residual, lops, lmg, lcg, lgeo, g, pending, zero, bodies,
+                               lmg, _B, lmg, _B)
         rr = _keep(pending, total, rr)
         res2 = ti.select(bb > 0, rr / bb, zero)
         res = _keep(pending, ti.sqrt(res2), res)
@@ -358,35 +396,11 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
                                          lcg[_DIR, k])
             if ti.static(bodies):
                 _lane_product(cg, lcg, _DIR, terms, geo, lgeo, consts, running, R, G, g)
-            curvature = zero
-            for t in range(nx * segments):
-                _, i, j0, j1 = _segment(t, nx, ny, segments)
-                first = _index(lgeo, 0, g, i, 0)
-                for j in range(j0, j1):
-                    k = first + j
-                    ad = _apply(lops, lcg, _DIR, k, s)
-                    if ti.static(bodies):
-                        ad = ad + lcg[_LPW, k]
-                    lcg[_ADIR, k] = ad
-                part = zero
-                for j in range(j0, j1):
-                    part += lcg[_DIR, first + j] * lcg[_ADIR, first + j]
-                curvature += part
+            curvature = _cells_and_sum(_matvec, lops, lmg, lcg, lgeo, g, running, zero, bodies,
+                                       lcg, _DIR, lcg, _ADIR)
             alpha = _keep(running, ti.select(curvature > 0, rz / curvature, zero), alpha)
-            total = zero
-            for t in range(nx * segments):
-                _, i, j0, j1 = _segment(t, nx, ny, segments)
-                first = _index(lgeo, 0, g, i, 0)
-                for j in range(j0, j1):
-                    k = first + j
-                    lcg[_SOL, k] = _keep(running, lcg[_SOL, k] + alpha * lcg[_DIR, k],
-                                         lcg[_SOL, k])
-                    lmg[_B, k] = _keep(running, lmg[_B, k] - alpha * lcg[_ADIR, k],
-                                       lmg[_B, k])
-                part = zero
-                for j in range(j0, j1):
-                    part += lmg[_B, first + j] * lmg[_B, first + j]
-                total += part
+            total = _cells_and_sum(_update, lops, lmg, lcg, lgeo, g, running, alpha, bodies,
+                                   lmg, _B, lmg, _B)
             rr = _keep(running, total, rr)
             iters += running
             go = (ti.select(rr > tol2 * bb, 1, 0) * ti.select(iters < maxiter, 1, 0)
