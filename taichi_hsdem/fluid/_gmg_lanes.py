@@ -37,6 +37,8 @@ from ._gmg_cycle import (COARSEST_CELLS, LANES, OVERCORRECTION, REAL, _ADIR, _AL
 #: the solve does not read, is left out).
 _LPW = 4
 _CG_ROWS = 5
+#: Column of the lanes' level table holding the group count (after _OFF, _NX, _NY).
+_GROUPS = 3
 
 
 def _upload(array, dtype, element=None):
@@ -81,15 +83,16 @@ class Lanes:
         self.groups = groups = group_count(n_batch)
         sizes = [groups * (nx + 2) * (ny + 1) for nx, ny in levels]
         offsets = np.concatenate([[0], np.cumsum(sizes)])
-        self.geo = _upload(np.array([[offsets[l], nx, ny] for l, (nx, ny) in
+        # (offset, nx, ny) of each level as the ndarrays' table, and the group count
+        self.geo = _upload(np.array([[offsets[l], nx, ny, groups] for l, (nx, ny) in
                                      enumerate(levels)]), ti.i32)
         self.pool = pool(real).fit(int(offsets[-1]), int(sizes[0]), groups)
 
     def solve(self, op, cg, state, flags, geo, chol, consts, maxiter, body):
         """The whole solve of every realization (:func:`_solve_lanes`)."""
         p = self.pool
-        _solve_lanes(op, cg, state, flags, geo, chol, self.geo, self.groups, consts, maxiter,
-                     *body, p.ops.tx, p.ops.ty, p.mg, p.cg, p.chol)
+        _solve_lanes(op, cg, state, flags, geo, chol, self.geo, consts, maxiter, *body,
+                     p.ops.tx, p.ops.ty, p.mg, p.cg, p.chol)
 
 
 class LanePool:
@@ -425,12 +428,12 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
 
 @ti.kernel
 def _solve_lanes(op: _Ops, cg: _Rows, state: _Rows, flags: _Ints, geo: _Ints, chol: _Chol,
-                 lgeo: _Ints, G: ti.i32, consts: _Consts, maxiter: ti.i32,
+                 lgeo: _Ints, consts: _Consts, maxiter: ti.i32,
                  bodies: ti.template(), terms: Terms, ltx: ti.template(), lty: ti.template(),
                  lmg: ti.template(), lcg: ti.template(), lchol: ti.template()):
     """The whole solve of every realization, a group of LANES per thread: copied
     into the lanes, solved, copied back (module docstring)."""
-    R = flags.shape[0]
+    R, G = flags.shape[0], lgeo[0, _GROUPS]
     lops = ti.static(LaneOps(ltx, lty))
     for t in range(G * _TASK):  # one group per thread (_TASK)
         if t % _TASK == 0:

@@ -631,9 +631,8 @@ class TaichiPressureSolver:
     #: after each, as on the CPU (the same bits).
     unread_iterations = True
 
-    #: Whether a batch solved one realization per thread runs its realizations
-    #: side by side (._gmg_lanes.lanes_pay; "auto": where they fill the lanes,
-    #: True: always, False: never; the same bits).
+    #: Realizations side by side (._gmg_lanes.lanes_pay): "auto" (where they fill
+    #: the lanes), True (always) or False (never); the same bits.
     lanes = "auto"
 
     def _read_report(self, k_dev):
