@@ -26,6 +26,19 @@ def test_bench_case_names_carry_overrides():
     assert f"fluid.update_interval={bench.PAPER_FLUID_EVERY}" in ov
 
 
+@pytest.mark.parametrize("lanes, used", [("on", True), ("off", False)])
+def test_bench_turns_the_solve_s_lanes_on_and_off(lanes, used):
+    """``tools/bench.py --lanes``: the pressure solve's realizations side by side
+    or one per thread, whatever the batch (its row says which ran)."""
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "bench.py"), "--cases",
+                           "disks-0.26-R10", "--sim-time", "0.002", "--lanes", lanes],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    row = json.loads([line for line in proc.stdout.splitlines() if line.startswith("{")][-1])
+    assert "error" not in row, row
+    assert row["lanes"] is used and row["realizations"] == 10
+
+
 def test_escapee_study_moves_one_knob_at_a_time_off_the_scene_defaults():
     conv = load_tool("convergence")
     from taichi_hsdem import load_scene

@@ -6,6 +6,7 @@
     python tools/bench.py --cases disks-0.26-R10,paper-disks-0.26-R1
     python tools/bench.py --cases disks-0.26-R10@fluid.workers=1,disks-0.26-R10
     python tools/bench.py --cases disks-0.26-R1 --sim-time 1 --video-frames 600
+    python tools/bench.py --cases disks-0.26-R16 --lanes off   # one realization per thread
 
 Cases: disks and squares at packing fractions 0.17 and 0.26 in the vani channel
 (scenes/vani_phi026.toml; squares from scenes/squares.toml with the same count),
@@ -241,6 +242,8 @@ def run_case(case, arch, precision, sim_time, video_frames=0):
         # carried volume (implicit coupling) or fixed obstacles: the solve differs
         "particle_flux": sim.scene.fluid.particle_flux if sim.fluid is not None else None,
         "fluid_workers": workers,
+        # whether the solve ran its realizations side by side (fluid/_gmg_lanes.py)
+        "lanes": getattr(getattr(sim.fluid, "solver", None), "_lanes", None) is not None,
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "worker_peak_rss_mb": worker_rss,
         # resident memory (process + workers) over the run's first and second half
@@ -279,12 +282,17 @@ def main(argv=None):
     p.add_argument("--fast-math", action="store_true",
                    help="compile the kernels with Taichi's fast_math (the package turns it "
                         "off for bit-identical results): to time what that costs")
+    p.add_argument("--lanes", default="auto", choices=("auto", "on", "off"),
+                   help="the pressure solve's realizations side by side (fluid/_gmg_lanes.py): "
+                        "where they fill the lanes (auto), always, or never; the same bits")
     p.add_argument("--one", help=argparse.SUPPRESS)   # internal: run one case here
     a = p.parse_args(argv)
     sim_time = a.sim_time or (0.02 if a.quick else 0.05)
     if a.one:
         if a.fast_math:
             _allow_fast_math()
+        from taichi_hsdem.fluid.gmg import TaichiPressureSolver
+        TaichiPressureSolver.lanes = {"auto": "auto", "on": True, "off": False}[a.lanes]
         print(json.dumps(run_case(a.one, a.arch, a.precision, sim_time, a.video_frames)),
               flush=True)
         return 0
@@ -292,7 +300,7 @@ def main(argv=None):
     for case in chosen:
         proc = subprocess.run([sys.executable, __file__, "--one", case, "--arch", a.arch,
                                "--precision", a.precision, "--sim-time", str(sim_time),
-                               "--video-frames", str(a.video_frames)]
+                               "--video-frames", str(a.video_frames), "--lanes", a.lanes]
                               + (["--fast-math"] if a.fast_math else []),
                               capture_output=True, text=True)
         if proc.returncode != 0:

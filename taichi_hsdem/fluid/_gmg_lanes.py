@@ -17,8 +17,8 @@ or in any batch: the V-cycle's helpers are those of :mod:`._gmg_cycle`, which
 take either storage; CG's scalars are vectors of the lanes' values, and where a
 lane's solve does something another's does not (stop, check its true residual,
 start again) the others' values are kept by a select, their arithmetic done and
-dropped. The moving bodies' term runs lane by lane on the ndarrays
-(:func:`._gmg_bodies._product_of`): its cells differ between realizations.
+dropped. The moving bodies' term runs lane by lane on the ndarrays, as
+:func:`._gmg_bodies._product_of` does it: its cells differ between realizations.
 Float64 only; float32 solves keep the scalar way. Package-internal."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 import numpy as np
@@ -64,11 +64,11 @@ def group_count(n_batch):
 def lanes_pay(n_batch, lanes="auto"):
     """Whether ``n_batch`` realizations are solved side by side: always (``lanes``
     True), never (False), or ("auto") where they fill at least 0.8 of their
-    groups' lanes. On 2 threads (vani's grid, moving
-    bodies, tools/profile_case.py-like runs of 0.3 s): 8 and 16 realizations in
-    full groups took 0.8 of the time of one per thread, 4 (two groups of 2) 1.1
-    times, 10 (groups of 3, 3, 2, 2) as long; the bodies' term, lane by lane, is
-    what does not shrink."""
+    groups' lanes. On 2 threads (the vani scene, moving bodies; ``python
+    tools/bench.py --cases disks-0.26-RN --lanes on|off``, docs/performance.md):
+    in full groups (8, 16, 100) a solve takes 0.7-0.9 of the time of one
+    realization per thread; 4 (two groups of 2) and 10 (groups of 3, 3, 2, 2)
+    1.1-1.2 times as long: the bodies' term, lane by lane, does not shrink."""
     if lanes != "auto":
         return bool(lanes)
     return n_batch >= 0.8 * LANES * group_count(n_batch)
@@ -97,9 +97,9 @@ class Lanes:
 
 class LanePool:
     """The lanes' fields, shared by every solver of one float type in a process
-    and grown to the largest asked for, in powers of two (a solve copies in what
-    it needs and keeps nothing there after; the fields stay until the process
-    ends)."""
+    and grown to the largest asked for, on a ladder of sizes (a solve copies in
+    what it needs and keeps nothing there after; the fields stay until the
+    process ends)."""
 
     def __init__(self, real):
         self.real = real
