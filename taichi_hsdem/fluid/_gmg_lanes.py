@@ -31,6 +31,7 @@ from ._gmg_cycle import (COARSEST_CELLS, LANES, OVERCORRECTION, REAL, _ADIR, _AL
                          _K_DX, _K_DY, _K_TOL2, _NX, _NY, _Ops, _PW, _RES, _RHS, _RR,
                          _RUNNING, _RZ, _Rows, _SOL, _TASK, _TX, _TY, _UNDRIVEN, _X, LaneOps,
                          _apply, _cycle_of, _diagonal, _index, _segment, _segments)
+from ._gmg_setup import _upload
 
 #: Rows of the lanes' CG field: the ndarray's solution, direction, A times it and
 #: right-hand side, then the bodies' term in row _LPW (the ndarray's _BASE, which
@@ -39,16 +40,6 @@ _LPW = 4
 _CG_ROWS = 5
 #: Column of the lanes' level table holding the group count (after _OFF, _NX, _NY).
 _GROUPS = 3
-
-
-def _upload(array, dtype, element=None):
-    """A device copy of a numpy array (``element``: a vector type for the last axis)."""
-    array = np.ascontiguousarray(array)
-    shape = array.shape[:-1] if element is not None else array.shape
-    out = ti.ndarray(element if element is not None else dtype, shape)
-    out.from_numpy(array.astype({ti.f64: np.float64, ti.f32: np.float32, ti.i32: np.int32,
-                                 ti.i8: np.int8}[dtype]))
-    return out
 
 
 def group_count(n_batch):
@@ -80,7 +71,7 @@ class Lanes:
     process's fields."""
 
     def __init__(self, levels, n_batch, real):
-        self.groups = groups = group_count(n_batch)
+        groups = group_count(n_batch)
         sizes = [groups * (nx + 2) * (ny + 1) for nx, ny in levels]
         offsets = np.concatenate([[0], np.cumsum(sizes)])
         # (offset, nx, ny) of each level as the ndarrays' table, and the group count
@@ -156,10 +147,10 @@ def _copy_in(op: ti.template(), cg: ti.template(), chol: ti.template(), geo: ti.
              lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
              lchol: ti.template(), lgeo: ti.template(), R, G, g):
     """Group g's operators of every level, Cholesky factors, right-hand side,
-    guess and search direction into the lanes, and its multigrid rows and other
-    CG rows cleared (the fields are shared: another solver's values may lie
-    where this one has the ghosts, which every sweep reads as 0); a lane past
-    the batch gets nothing to solve (zero operator, unit factor)."""
+    guess and search direction into the lanes, and its multigrid rows cleared
+    (the fields are shared: another solver's values may lie where this one has
+    the ghosts, which every sweep reads as 0); a lane past the batch gets
+    nothing to solve (zero operator, unit factor)."""
     m = geo[geo.shape[0] - 1, _NX] * geo[geo.shape[0] - 1, _NY]
     zero = ti.Vector([0.0] * LANES, dt=REAL.dtype)
     for l in range(geo.shape[0]):
@@ -167,10 +158,6 @@ def _copy_in(op: ti.template(), cg: ti.template(), chol: ti.template(), geo: ti.
         for c in range(lgeo[l, 0] + g * per, lgeo[l, 0] + (g + 1) * per):
             lmg[_X, c] = zero
             lmg[_B, c] = zero
-    per0 = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
-    for c in range(g * per0, (g + 1) * per0):
-        lcg[_ADIR, c] = zero
-        lcg[_LPW, c] = zero
     for q in range(LANES):
         r = q * G + g
         for l in range(geo.shape[0]):
@@ -210,19 +197,6 @@ def _copy_out(cg: ti.template(), geo: ti.template(), lcg: ti.template(), R, G, g
 
 
 # ---------------------------------------------------------------- the lanes' CG
-@ti.func
-def _lane_sum(a: ti.template(), ra, b: ti.template(), rb, lgeo: ti.template(), g):
-    """``sum a[ra] b[rb]`` of every lane in the order of the scalar solve's
-    segment sums and their total (:func:`._gmg_cg._segment_sum`, ``_total``)."""
-    nx, ny = lgeo[0, _NX], lgeo[0, _NY]
-    segments = _segments(ny)
-    total = ti.Vector([0.0] * LANES, dt=REAL.dtype)
-    for t in range(nx * segments):
-        _, i, j0, j1 = _segment(t, nx, ny, segments)
-        total += _part(a, ra, b, rb, _index(lgeo, 0, g, i, 0), j0, j1)
-    return total
-
-
 @ti.func
 def _part(a: ti.template(), ra, b: ti.template(), rb, first, j0, j1):
     """One segment's ``sum a[ra] b[rb]``, cells first + j0 .. first + j1 - 1."""
@@ -327,11 +301,19 @@ def _update(lops: ti.template(), lmg: ti.template(), lcg: ti.template(), k, s, m
 
 
 @ti.func
+def _no_step(lops: ti.template(), lmg: ti.template(), lcg: ti.template(), k, s, mask, coef,
+             bodies: ti.template()):
+    """No change: _cells_and_sum with it is a dot product alone."""
+    pass
+
+
+@ti.func
 def _cells_and_sum(step: ti.template(), lops: ti.template(), lmg: ti.template(),
                    lcg: ti.template(), lgeo: ti.template(), g, mask, coef,
                    bodies: ti.template(), a: ti.template(), ra, b: ti.template(), rb):
     """``step`` at every fine cell of group g, then ``sum a[ra] b[rb]`` of every lane,
-    segment by segment as the scalar solve's _for_cells_and_sum_of and its total."""
+    segment by segment as the scalar solve's _for_cells_and_sum_of and its total
+    (:func:`._gmg_cg._segment_sum`, ``_total``)."""
     nx, ny = lgeo[0, _NX], lgeo[0, _NY]
     segments = _segments(ny)
     total = ti.Vector([0.0] * LANES, dt=REAL.dtype)
@@ -360,7 +342,8 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
     for q in ti.static(range(LANES)):
         active[q] = ti.select(q * G + g < R, 1, 0)
     iters = ti.Vector([0] * LANES)
-    bb = _lane_sum(lcg, _RHS, lcg, _RHS, lgeo, g)
+    bb = _cells_and_sum(_no_step, lops, lmg, lcg, lgeo, g, active, zero, bodies, lcg, _RHS,
+                        lcg, _RHS)
     undriven = ti.select(bb == 0, 1, 0)
     for i in range(nx):
         first = _index(lgeo, 0, g, i, 0)
@@ -387,7 +370,8 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
         pending = ti.Vector([0] * LANES)
         while _any(running):
             _cycle_of(lops, lmg, lchol, lgeo, g, 0, OVERCORRECTION)
-            rz_new = _lane_sum(lmg, _B, lmg, _X, lgeo, g)
+            rz_new = _cells_and_sum(_no_step, lops, lmg, lcg, lgeo, g, running, zero, bodies,
+                                    lmg, _B, lmg, _X)
             beta = _keep(running, ti.select(first_step != 0, zero, rz_new / rz), beta)
             rz = _keep(running, rz_new, rz)
             first_step = _keep(running, 0, first_step)

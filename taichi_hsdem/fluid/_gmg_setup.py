@@ -5,6 +5,8 @@ particles' carried flux), the initial guess, the Galerkin coarsening of the
 uses them is in :mod:`._gmg_cycle`. Package-internal: :mod:`.gmg` is the API."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 
+import numpy as np
+
 from ..backend import ti
 from ._gmg_cycle import (REAL, _BAD, _BASE, _CHANGED, _INLET, _K_DX, _K_DY, _K_GX, _K_GY,
                          _K_INFLOW, _K_PREF, _NX, _NY, _RHS, _SOL, _TASK, _TX, _TY, _ZEROS,
@@ -273,3 +275,13 @@ def _load_guess(x0: _Grid, unknown: _Cells, cg: _Rows, geo: _Ints, consts: _Cons
             if not (unknown[r, i, j] != 0 and _is_finite(v)):
                 v = 0.0
             cg[_SOL, _index(geo, 0, r, i, j)] = v
+
+
+def _upload(array, dtype, element=None):
+    """A device copy of a numpy array (``element``: a vector type for the last axis)."""
+    array = np.ascontiguousarray(array)
+    shape = array.shape[:-1] if element is not None else array.shape
+    out = ti.ndarray(element if element is not None else dtype, shape)
+    out.from_numpy(array.astype({ti.f64: np.float64, ti.f32: np.float32, ti.i32: np.int32,
+                                 ti.i8: np.int8}[dtype]))
+    return out
