@@ -28,16 +28,12 @@ c(r) w.n (ns=1: face midpoint).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import pathlib
 import sys
 import time
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from scipy.integrate import quad
 
 HERE = pathlib.Path(__file__).resolve().parent
@@ -45,6 +41,8 @@ sys.path.insert(0, str(HERE))
 from taichi_hsdem import load_scene  # noqa: E402
 from taichi_hsdem.resolve import resolve  # noqa: E402
 from taichi_hsdem.laws import harmonic_mean  # noqa: E402
+from model_pair_lattice import (lattice_parser, layout, periodic_operator,  # noqa: E402
+                                report)
 
 SCENE = str(HERE.parent / "scenes" / "vani_phi026.toml")
 
@@ -129,13 +127,7 @@ class DomeLattice:
             for w in (wx, wy, wom):
                 qs.append(self.h * (cc * w).mean(axis=1))
         n = self.n
-        A = sp.coo_array((np.concatenate([T, T, -T, -T]),
-                          (np.concatenate([self.fa, self.fb, self.fa, self.fb]),
-                           np.concatenate([self.fa, self.fb, self.fb, self.fa]))),
-                         shape=(n, n)).tocsc()
-        lu = spla.splu(A[1:, 1:].tocsc())
-        Tx = np.where(self.is_x, T, 0.0)
-        gx_out = np.bincount(self.fa, Tx, n) - np.bincount(self.fb, Tx, n)
+        A, lu, gx_out = periodic_operator(T, self.fa, self.fb, self.is_x, n)
         nd = 3 * nb
         dp_list, flux_list, resid = [], [], 0.0
         self.pts = []
@@ -183,7 +175,6 @@ class DomeLattice:
 
 
 def run(args):
-    from model_pair_lattice import layout       # the model's tool: the same cells
     model = resolve(load_scene(SCENE, args.set))
     s = model.species[0]
     h = float(model.fluid_dx)
@@ -212,24 +203,12 @@ def run(args):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--arrangement", choices=("side", "inline"), default="side")
-    ap.add_argument("--gap", type=float, default=0.05)
-    ap.add_argument("--phi", type=float, default=0.1)
-    ap.add_argument("--lone", action="store_true")
-    ap.add_argument("--n", type=int)
-    ap.add_argument("--offsets", type=int, default=64)
+    ap = lattice_parser(__doc__, phi=0.1)
     ap.add_argument("--ns", type=int, default=4)
     ap.add_argument("--films", type=int, default=2)
     ap.add_argument("--drag-scale", type=float, default=1.0)
-    ap.add_argument("--set", action="append", default=[])
-    ap.add_argument("--out")
     args = ap.parse_args(argv)
-    out = run(args)
-    print(json.dumps(out))
-    if args.out:
-        with open(args.out, "w") as fh:
-            json.dump(out, fh, indent=1)
+    report(run(args), args.out)
     return 0
 
 

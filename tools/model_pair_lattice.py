@@ -122,16 +122,10 @@ class PeriodicLattice:
         kappa = np.where(inside, self.kp, self.kf).ravel()
         T = harmonic_mean(kappa[self.fa], kappa[self.fb]) / self.eta   # dy/dx = 1
         n = self.n
-        A = sp.coo_array((np.concatenate([T, T, -T, -T]),
-                          (np.concatenate([self.fa, self.fb, self.fa, self.fb]),
-                           np.concatenate([self.fa, self.fb, self.fb, self.fa]))),
-                         shape=(n, n)).tocsc()
-        lu = spla.splu(A[1:, 1:].tocsc())
+        A, lu, gx_out = periodic_operator(T, self.fa, self.fb, self.is_x, n)
         nb = len(centres)
         # right-hand sides: fixed (G = 1), then (disk j, component q) unit velocities
         cases = [("fixed", None, None)] + [("move", j, q) for j in range(nb) for q in (0, 1)]
-        Tx = np.where(self.is_x, T, 0.0)
-        gx_out = np.bincount(self.fa, Tx, n) - np.bincount(self.fb, Tx, n)  # G h sum T
         results = []
         for kind, j, q in cases:
             if kind == "fixed":
@@ -254,22 +248,45 @@ def run(args):
     return out
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def periodic_operator(T, fa, fb, is_x, n):
+    """The periodic grid's operator (faces ``fa``-``fb`` of transmissibility
+    ``T``), its LU factor with cell 0's pressure fixed and, per cell, the net
+    x-face transmissibility out of it: the source a unit mean gradient along x
+    puts there (``G h sum T``)."""
+    A = sp.coo_array((np.concatenate([T, T, -T, -T]),
+                      (np.concatenate([fa, fb, fa, fb]), np.concatenate([fa, fb, fb, fa]))),
+                     shape=(n, n)).tocsc()
+    Tx = np.where(is_x, T, 0.0)
+    return A, spla.splu(A[1:, 1:].tocsc()), np.bincount(fa, Tx, n) - np.bincount(fb, Tx, n)
+
+
+def lattice_parser(doc, phi=None):
+    """The lattice's options (:func:`layout` reads them), for this tool and the
+    prototypes built on it: ``phi`` a default, or None to require ``--phi``."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
     ap.add_argument("--arrangement", choices=("side", "inline"), default="side")
     ap.add_argument("--gap", type=float, default=0.05)
-    ap.add_argument("--phi", type=float, required=True)
+    ap.add_argument("--phi", type=float, **({"required": True} if phi is None else
+                                            {"default": phi}))
     ap.add_argument("--lone", action="store_true", help="one disk per square cell")
     ap.add_argument("--n", type=int, help="with --lone: cells a side (else from phi)")
     ap.add_argument("--offsets", type=int, default=64)
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--out")
-    args = ap.parse_args(argv)
-    out = run(args)
-    print(json.dumps(out, indent=1))
-    if args.out:
-        with open(args.out, "w") as fh:
+    return ap
+
+
+def report(out, path, indent=None):
+    """``out`` as JSON on stdout (``indent``) and, with ``path``, into that file."""
+    print(json.dumps(out, indent=indent))
+    if path:
+        with open(path, "w") as fh:
             json.dump(out, fh, indent=1)
+
+
+def main(argv=None):
+    args = lattice_parser(__doc__).parse_args(argv)
+    report(run(args), args.out, indent=1)
     return 0
 
 
