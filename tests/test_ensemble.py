@@ -55,6 +55,21 @@ def test_seed_alone_reproduces_its_realization(batch_result, k):
                                       err_msg=key)
 
 
+def in_one_group(make, lanes, monkeypatch):
+    """``make()``'s simulation, with ``lanes`` True its batch's pressure solved in
+    the lanes of one group (fluid/_gmg_lanes.py: groups as for one thread), so
+    that its realizations solve side by side."""
+    from taichi_hsdem import limits
+    from taichi_hsdem.fluid.gmg import TaichiPressureSolver
+    monkeypatch.setattr(TaichiPressureSolver, "lanes", lanes)
+    if lanes is True:
+        monkeypatch.setattr(limits, "thread_share", lambda: 1)
+    sim = make()
+    if lanes is True:
+        assert sim.fluid.solver._lanes.geo.to_numpy()[0, 3] == 1     # one group
+    return sim
+
+
 @pytest.mark.parametrize("lanes", ["auto", True])
 def test_flow_rate_inlet_batch_and_alone_give_the_same_bits(lanes, monkeypatch):
     """With a flow-rate inlet the inflow is shared among the inlet cells by their
@@ -64,14 +79,12 @@ def test_flow_rate_inlet_batch_and_alone_give_the_same_bits(lanes, monkeypatch):
     realization 1, in a batch of two and alone; and with the batch's two solved
     side by side in one group's lanes (fluid/_gmg_lanes.py), the moving bodies'
     term included."""
-    from taichi_hsdem.fluid.gmg import TaichiPressureSolver
-    monkeypatch.setattr(TaichiPressureSolver, "lanes", lanes)
     vani = HOURGLASS.parent / "vani_phi026.toml"
 
     def run(seed, realizations):
-        sim = Simulation(load_scene(vani, ["run.t_end=0.05", f"run.seed={seed}",
-                                           f"run.realizations={realizations}",
-                                           "fluid.workers=1"]))
+        sim = in_one_group(lambda: Simulation(load_scene(
+            vani, ["run.t_end=0.05", f"run.seed={seed}", f"run.realizations={realizations}",
+                   "fluid.workers=1"])), lanes if realizations > 1 else "auto", monkeypatch)
         first = sim.pressure().copy()
         return first, sim.run()
 
@@ -110,14 +123,18 @@ def stream(name, seed, realizations):
                                                         f"run.realizations={realizations}"]))
 
 
-@pytest.mark.parametrize("name", STREAMS)
-def test_batch_equals_alone_through_escapes_refeeds_and_clogs(name):
+@pytest.mark.parametrize("name, lanes", [(name, "auto") for name in STREAMS]
+                         + [("disks-flow_rate", True), ("disks-pressure", True)])
+def test_batch_equals_alone_through_escapes_refeeds_and_clogs(name, lanes, monkeypatch):
     """Realization k of a batch of two is seed k alone, to the bit, over a run in
     which bodies escape and are fed again (and, with disks, one realization clogs
     and runs on): results, series, final state. The pentagons (level-set contacts,
-    the per-step stepper) compare one realization, to keep the test short."""
+    the per-step stepper) compare one realization, to keep the test short. The
+    disks again with the batch's pressure solved side by side in the lanes
+    (fluid/_gmg_lanes.py), both inlets: a realization that has clogged or is
+    re-fed solves beside one that has not."""
     _, _, clogs, alone_ks = STREAMS[name]
-    batch = stream(name, 0, 2).run()
+    batch = in_one_group(lambda: stream(name, 0, 2), lanes, monkeypatch).run()
     rows = batch.summary["realizations"]
     for k, row in enumerate(rows):
         dead = int(np.count_nonzero(~batch.final["alive"][k]))
