@@ -23,6 +23,9 @@ import numpy as np
 
 SPHERE_IN_GAP = Path(__file__).with_name("data") / "sphere_in_gap.csv"
 SPHERE_SPIN = Path(__file__).with_name("data") / "sphere_spin.csv"
+PAIR_MOBILITY_TABLE = Path(__file__).with_name("data") / "pair_mobility.csv"
+#: Beyond this surface gap (over the pair's mean d_eq) the pair resistance is zero.
+PAIR_CUTOFF = 1.0
 
 
 def restitution_factor(e: float) -> float:
@@ -150,6 +153,13 @@ def _table(path: Path, columns: tuple[str, ...]) -> np.ndarray:
 def _sphere_table() -> np.ndarray:
     """``(d/H, drift ratio, free dipole)`` rows of :data:`SPHERE_IN_GAP`, by d/H."""
     return _table(SPHERE_IN_GAP, ("d_over_H", "drift_ratio", "dipole_free"))
+
+
+def pair_mobility_table() -> np.ndarray:
+    """``(g, alpha, beta)`` rows of :data:`PAIR_MOBILITY_TABLE`, by the surface gap
+    ``g`` over d: the close pairs' resistance of ``fluid.pair_mobility``
+    (:mod:`taichi_hsdem.dem.pairs`; written by ``tools/pair_mobility_fit.py``)."""
+    return _table(PAIR_MOBILITY_TABLE, ("g", "alpha", "beta"))
 
 
 def _spin_table() -> np.ndarray:

@@ -220,12 +220,12 @@ def test_a_real_runs_clogging_arch_formed_as_the_clog_did_and_is_the_final_state
     model = resolve(load_scene(VANI, SETS))
     census = observables.ArchCensus(model)
     shapes = [s.shape for s in model.species]
-    every = model.check_every * model.dt
-    # measured: realization 0 clogs at 1.05 s
-    assert any(real["clogged"] for real in summary["realizations"])
+    # measured: realization 1 clogs at 0.79 s on a pair, realization 0 forms no
+    # arch in 1.5 s
+    assert any(real["clogged"] for real in summary["realizations"]) and rows
     for k, real in enumerate(summary["realizations"]):
         mine = [a for a in rows if a["realization"] == str(k)]
-        assert real["arches_formed"] == len(mine) > 0
+        assert real["arches_formed"] == len(mine)
         assert [a["arch"] for a in mine] == [str(n) for n in range(len(mine))]
         for a in mine[:-1]:                          # only the latest can hold
             assert a["held"] == "false" and a["failure"] in ("escaped", "rolled", "slid")
@@ -235,10 +235,12 @@ def test_a_real_runs_clogging_arch_formed_as_the_clog_did_and_is_the_final_state
         held = mine[-1]
         assert (held["held"], held["t_broken"], held["failure"]) == ("true", "", "held")
         # the arch touches, then its particles settle until the clog criterion
-        # finds them at rest (t_clog): one check later (four before the plates'
-        # spin drag: the particles settled longer)
+        # finds them at rest (t_clog), which also waits for the disks already
+        # past the arch to escape (measured: the arch at 0.736 s, the last escape
+        # 0.758 s, t_clog 0.793 s; with the earlier defaults one check after the
+        # arch formed, four before the plates' spin drag)
         t_formed = float(held["t_formed"])
-        assert real["t_last_escape"] < t_formed <= real["t_clog"] <= t_formed + 1.000001 * every
+        assert t_formed <= real["t_clog"] <= max(t_formed, real["t_last_escape"]) + 0.05
         # the arch of the final state that the figure analysis finds (every
         # particle searched), at the position the census gave
         fs = {key: final[key][k] for key in ("x", "theta", "alive")}
@@ -300,7 +302,8 @@ def test_the_arches_command_prints_a_run_folder_and_refuses_what_is_no_run(
                 assert (f"held: particles {a['ids']} at x = {float(a['x_over_d']):+.2f} d "
                         f"from the neck") in lines[k]
     held = sum(a["held"] == "true" for a in rows)
-    assert lines[2].startswith(f"total: {len(rows)} arches formed in 2 realizations, "
+    word = "arch" if len(rows) == 1 else "arches"
+    assert lines[2].startswith(f"total: {len(rows)} {word} formed in 2 realizations, "
                                f"{held} held")
     assert main(["arches", str(tmp_path)]) == 2
     err = capsys.readouterr().err

@@ -98,6 +98,7 @@ def test_a_cluster_that_cannot_be_used_is_refused_before_the_folder_is_made(
 
 
 def test_connecting_to_a_cluster_is_said_before_the_wait(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("distributed")     # the cluster extra (tools/setup.sh leaves it out)
     from test_study_folders import sweep_file
     monkeypatch.setattr(cluster_module, "CONNECT_TIMEOUT", 1)
     out = tmp_path / "out"

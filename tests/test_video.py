@@ -398,8 +398,10 @@ def test_the_colour_scale_is_the_whole_runs_and_never_widens(tmp_path):
     _, frames = read_video(tmp_path / "video.mp4")
     assert len(frames) == 4
     # the colour bar and its labels (the strip's right third) alike in every frame
+    # but for the codec's noise on a few glyph pixels (measured: 4 of 2560, at the
+    # low label's top row; a changed label or a moved bar changes dozens)
     strip = [f[rec.renderer.domain_height:, 2 * f.shape[1] // 3:].astype(int) for f in frames]
-    assert all(np.abs(s - strip[0]).max() <= TOL for s in strip[1:])
+    assert all((np.abs(s - strip[0]).max(axis=-1) > TOL).sum() <= 8 for s in strip[1:])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["video.mp4"]
 
 

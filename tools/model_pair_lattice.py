@@ -115,8 +115,11 @@ class PeriodicLattice:
             owner[np.hypot(dx, dy) <= self.radius] = i      # highest index wins
         return owner
 
-    def solve(self, centres):
-        """Steady drift of the disks at ``centres`` (cell frame, metres)."""
+    def pieces(self, centres):
+        """The steady balance's linear pieces for disks at ``centres``: the node
+        forces ``F0`` of the fixed solve (G = 1, v = 0) and ``M`` (column k: those of
+        unit velocity component k, G = 0), the column flux of each (``flux0``,
+        ``fluxv``), and the solves' largest residual and column-flux spread."""
         owner = self.occupancy(centres)
         inside = owner >= 0
         kappa = np.where(inside, self.kp, self.kf).ravel()
@@ -152,23 +155,58 @@ class PeriodicLattice:
             forces = np.array([self.node_force(pt.reshape(self.nx, self.ny), G, c)
                                for c in centres])
             results.append({"forces": forces, "flux": col.mean(), "flux_spread": np.ptp(col),
-                            "resid": float(np.abs(resid[1:]).max()), "rhs_sum": float(rhs.sum())})
-        # m xi v = F_fix G + M v  (unknowns: v_j,q for every disk and component)
-        nu = 2 * nb
-        M = np.zeros((nu, nu))
-        for k, (kind, j, q) in enumerate(cases[1:]):
-            M[:, k] = results[k + 1]["forces"].ravel()
-        F0 = results[0]["forces"].ravel()
-        vel = np.linalg.solve(self.mass * self.xi * np.eye(nu) - M, F0).reshape(nb, 2)
-        flux = results[0]["flux"] + sum(results[k + 1]["flux"] * vel.ravel()[k]
-                                        for k in range(nu))
-        U = flux / (self.ny * self.h)
-        return {"V": vel[:, 0].tolist(), "Vy": vel[:, 1].tolist(), "U": U,
-                "V_over_U": float(vel[:, 0].mean() / U),
-                "cells_inside": [int((owner == j).sum()) for j in range(nb)],
-                "max_resid": max(r["resid"] for r in results),
+                            "resid": float(np.abs(resid[1:]).max())})
+        return {"F0": results[0]["forces"].ravel(),
+                "M": np.array([r["forces"].ravel() for r in results[1:]]).T,
+                "flux0": results[0]["flux"], "fluxv": np.array([r["flux"] for r in results[1:]]),
+                "owner": owner, "max_resid": max(r["resid"] for r in results),
                 "column_flux_spread": max(r["flux_spread"] for r in results)
                 / abs(results[0]["flux"])}
+
+    def pair_resistance(self, centres, table, cutoff):
+        """``K`` (2 nb x 2 nb, block diagonal) of ``fluid.pair_mobility``
+        (taichi_hsdem/dem/pairs.py) for disks at ``centres``: every other disk and
+        every periodic image (a disk's own included) within the cutoff."""
+        nb, d = len(centres), 2.0 * self.radius
+        Lx, Ly = self.nx * self.h, self.ny * self.h
+        c = np.asarray(centres, float)
+        K = np.zeros((2 * nb, 2 * nb))
+        reach = int(math.ceil((1.0 + cutoff) * d / min(Lx, Ly))) + 1
+        for i in range(nb):
+            for j in range(nb):
+                for a in range(-reach, reach + 1):
+                    for b in range(-reach, reach + 1):
+                        sep = c[j] - c[i] + np.array([a * Lx, b * Ly])
+                        dist = math.hypot(*sep)
+                        if dist == 0.0 or dist / d - 1.0 >= cutoff:
+                            continue
+                        alpha, beta = pair_coefficients(table, dist / d - 1.0)
+                        e = sep / dist
+                        K[2 * i:2 * i + 2, 2 * i:2 * i + 2] += (
+                            alpha * np.eye(2) + beta * (2.0 * np.outer(e, e) - np.eye(2)))
+        return K
+
+    def drift(self, parts, K=None):
+        """``(velocities (nb, 2), U)``: the steady drift ``m xi (I - K) v = F0 + M v``
+        (K = 0: no pair resistance) and the mean volume flux per unit width."""
+        nu = len(parts["F0"])
+        K = np.zeros((nu, nu)) if K is None else K
+        vel = np.linalg.solve(self.mass * self.xi * (np.eye(nu) - K) - parts["M"], parts["F0"])
+        flux = parts["flux0"] + parts["fluxv"] @ vel
+        return vel.reshape(-1, 2), flux / (self.ny * self.h)
+
+    def solve(self, centres, pair=None):
+        """Steady drift of the disks at ``centres`` (cell frame, metres); ``pair``:
+        ``(table, cutoff)`` of the close pairs' resistance, or None."""
+        parts = self.pieces(centres)
+        K = None if pair is None else self.pair_resistance(centres, *pair)
+        vel, U = self.drift(parts, K)
+        owner = parts["owner"]
+        return {"V": vel[:, 0].tolist(), "Vy": vel[:, 1].tolist(), "U": U,
+                "V_over_U": float(vel[:, 0].mean() / U),
+                "cells_inside": [int((owner == j).sum()) for j in range(len(centres))],
+                "max_resid": parts["max_resid"],
+                "column_flux_spread": parts["column_flux_spread"]}
 
     def node_force(self, pt, G, centre):
         """-H sum_k sigma(p_k) a_k, sigma bilinear over the four cell centres
@@ -223,19 +261,21 @@ def run(args):
     grid = (np.arange(k) + 0.5) / k
     offs = np.array([(u, v) for u in grid for v in grid])   # stratified: k x k in a cell
     t0 = time.perf_counter()
+    pair = pair_setting(model, args)
     recs = []
     # the pair's centre at a random place in its cell (the lattice is cell-periodic:
     # only the offset within a grid cell matters)
     for off in offs:
         X0 = (0.5 * nx + off[0]) * h
         Y0 = (0.5 * ny + off[1]) * h
-        recs.append(lat.solve([(X0 + x, Y0 + y) for x, y in base]))
+        recs.append(lat.solve([(X0 + x, Y0 + y) for x, y in base], pair))
     vu = np.array([r["V_over_U"] for r in recs])
     out = {"scene": SCENE, "set": args.set, "lone": args.lone,
            "arrangement": None if args.lone else args.arrangement,
            "gap": None if args.lone else args.gap, "phi_nominal": args.phi,
            "phi_actual": phi_actual, "nx": nx, "ny": ny, "h": h, "d_over_h": s.d_eq / h,
            "d_over_H": s.d_eq / float(model.scene.fluid.gap), "carried": lat.c, "xi": lat.xi, "kappa_p_over_free": lat.kp / lat.kf,
+           "pair_mobility": pair is not None,
            "offsets": len(offs), "V_over_U": float(vu.mean()),
            "V_over_U_std": float(vu.std()), "V_over_U_sem": float(vu.std() / math.sqrt(len(vu))),
            "Vy_over_V_rms": float(np.sqrt(np.mean([np.mean(np.square(r["Vy"]))
@@ -246,6 +286,28 @@ def run(args):
            "cells_inside_mean": float(np.mean([np.mean(r["cells_inside"]) for r in recs])),
            "wall_s": time.perf_counter() - t0}
     return out
+
+
+def pair_coefficients(table, g):
+    """``(alpha, beta)`` of the pair resistance at gap ``g``: dem/pairs.py's
+    piecewise-linear rule on ``table`` (rows ``g, alpha, beta``)."""
+    if g >= table[-1, 0]:
+        return 0.0, 0.0
+    if g <= table[0, 0]:
+        return float(table[0, 1]), float(table[0, 2])
+    return float(np.interp(g, table[:, 0], table[:, 1])), float(np.interp(g, table[:, 0],
+                                                                          table[:, 2]))
+
+
+def pair_setting(model, args):
+    """``(table, cutoff)`` of the pair resistance the lattice applies (``--pair-mobility``:
+    ``auto`` as the scene resolves ``fluid.pair_mobility``), or None."""
+    choice = getattr(args, "pair_mobility", "auto")
+    on = model.pair_mobility if choice == "auto" else choice == "on"
+    if not on:
+        return None
+    from taichi_hsdem.laws import PAIR_CUTOFF, pair_mobility_table
+    return pair_mobility_table(), PAIR_CUTOFF
 
 
 def periodic_operator(T, fa, fb, is_x, n):
@@ -272,6 +334,9 @@ def lattice_parser(doc, phi=None):
     ap.add_argument("--n", type=int, help="with --lone: cells a side (else from phi)")
     ap.add_argument("--offsets", type=int, default=64)
     ap.add_argument("--set", action="append", default=[])
+    ap.add_argument("--pair-mobility", choices=("auto", "on", "off"), default="auto",
+                    help="the close pairs' resistance (fluid.pair_mobility): as the scene "
+                         "resolves it, or on/off")
     ap.add_argument("--out")
     return ap
 

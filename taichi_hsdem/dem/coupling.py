@@ -35,6 +35,8 @@ from ..fluid import PressureSolver
 from ..fluid.gmg import REAL, BodyTerms, TaichiPressureSolver
 from . import state
 from .integrate import plate_rate
+from .pairs import _PAIR_BODIES, _PAIR_PARTICLES, pair_mobility
+from ..laws import PAIR_CUTOFF, pair_mobility_table
 from .kmath import cross, exp_neg, node_world, rot, rot_t, sin_cos, spin, template_sample
 from ..layout import SAMPLING
 
@@ -311,6 +313,13 @@ class FluidCoupling:
         # the realizations apply_forces sets: all of them, or those it is given
         self._every = state.array(np.ones(n_real, dtype=np.int32), ti.i32)
         self._chosen = state._zeros(n_real, ti.i32)
+        # the close pairs' resistance (fluid.pair_mobility, dem/pairs.py): the
+        # broad phase's cells find the pairs (``neighbors``, set by the Simulation)
+        self.neighbors = None
+        self._pairs = None
+        if model.pair_mobility:
+            self._pairs = (state.array(pair_mobility_table()),
+                           state.array(np.array([s.xi for s in model.species])))
         # the implicit carried volume (fluid.flux_coupling = "implicit"): the
         # bodies' terms of the pressure solve, made on the first update
         self.implicit = bool(fl.particle_flux) and fl.flux_coupling == "implicit"
@@ -335,7 +344,8 @@ class FluidCoupling:
         self.seconds = 0.0
 
     def apply_forces(self, bodies, batch, particles, templates, only=None):
-        """Set every body's held fluid force and moment from the last pressure; with
+        """Set every body's held fluid force and moment from the last pressure (and,
+        with ``fluid.pair_mobility``, the close pairs' resistance); with
         ``only`` ((R,) bool), those of the realizations it flags alone, so that
         re-inserting a body in one realization leaves the others' forces as a run
         of theirs alone has them (batch equals alone)."""
@@ -347,6 +357,11 @@ class FluidCoupling:
         pressure_forces(b.pack_of(_HELD), batch.running, which, particles.species,
                         t.pack_of(_NODES), self.pres, self.active, *self.grid, self.gap,
                         self.sampling)
+        if self._pairs is not None:
+            table, xi = self._pairs
+            pair_mobility(b.pack_of(_PAIR_BODIES), batch.running, which,
+                          particles.pack_of(_PAIR_PARTICLES), xi, self.neighbors.pack(),
+                          table, PAIR_CUTOFF)
 
     def forget_velocity(self, r: int, i: int):
         """Body ``i`` of realization ``r`` was re-inserted: it carries no flux yet."""

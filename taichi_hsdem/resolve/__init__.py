@@ -34,7 +34,7 @@ from .domain import (_bounding_box, _check_feed, _check_fit, _check_steps, _flui
 from .model import (FLUID_CELLS_PER_D, MIN_FLUID_CELLS_ACROSS_CONSTRICTION,
                     MIN_FLUID_CELLS_PER_DIAMETER, MIN_WALL_CELLS_PER_DIAMETER, NODE_BYTES,
                     SKIN_FRACTION, UPDATE_CELL_FRACTION, Model, Species, _Resolution, _size_keys)
-from .particles import (_auto_nodes, _check_nodes, _drift, _ls_spacing, _plate,
+from .particles import (_auto_nodes, _check_nodes, _drift, _ls_spacing, _pair_mobility, _plate,
                         _spin_drag, _stiffness, auto_node_spacing, critical_time_step,
                         node_gap, node_sagitta, pair_table, species_shape, wall_table)
 
@@ -197,7 +197,7 @@ def _resolve(scene: Scene, arch: str) -> Model:
                               lambda: mass * t.inertia_per_mass,
                               f"{key}.density, {_size_keys(k, sp)}, fluid.gap", "kg m^2")
         ls = _ls_spacing(res, k, sp, t, widths[k], all_disks)
-        xi, carried = _drift(res, scene, sp, t, kp, kappa_free, k)
+        xi, carried = _drift(res, scene, sp, t, kp, kappa_free, k, fluid_dx)
         spin = _spin_drag(res, scene, sp, t, xi, inertia, k)
         plate, creep = _plate(res, scene, sp, t, mass, xi, k)
         species.append(Species(name=sp.name, shape=t, count=count, density=sp.density,
@@ -280,6 +280,7 @@ def _resolve(scene: Scene, arch: str) -> Model:
     if f.enabled:
         _fluid_grid(res, model, nx, ny)
     model.skin = SKIN_FRACTION * d_min
+    model.pair_mobility = _pair_mobility(res, scene, species)
     _resolve_stepping(model, arch, res.values, res.notes)
     if f.enabled:
         _resolve_solver(model, arch, res)

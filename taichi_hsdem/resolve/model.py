@@ -115,6 +115,7 @@ class Model:
     fluid_solver: str = "amg"     # "gmg" or "amg" (fluid.solver resolved)
     check_every: int = CHECK_INTERVAL  # steps between host-side checks
     skin: float = 0.0             # Verlet skin
+    pair_mobility: bool = False   # fluid.pair_mobility resolved (dem/pairs.py)
     # mean fluid speed through the constriction of the open channel (no particles)
     open_channel_speed: float | None = None
     notes: dict[str, str] = field(default_factory=dict)

@@ -15,6 +15,7 @@ from .. import laws as lgs
 from ..laws import harmonic_mean, restitution_factor
 from ..layout import N_PAIR, PAIR_CE, PAIR_KN, PAIR_KS, PAIR_MU, PAIR_MUR
 from ..limits import Part
+from ..fluid.grid_dipole import carried_speed
 from ..scene import Scene
 from ..scene.keys import AUTO, shape_vertex_count
 from .model import (LS_DIAMETER_CELLS, LS_THINNEST_CELLS, MIN_LS_CELLS_PER_DIAMETER,
@@ -220,12 +221,51 @@ def _ls_spacing(res: _Resolution, k: int, sp, t: shp.Shape, w: float,
     return ls
 
 
+#: d/H of the 3D Stokes pairs the pair mobility is fitted to, and how far from it
+#: "auto" applies it (docs/model.md section 3.5).
+PAIR_MOBILITY_DH, PAIR_MOBILITY_DH_SPAN = 0.875, 0.05
+
+
+def _pair_mobility(res: _Resolution, scene: Scene, species) -> bool:
+    """``fluid.pair_mobility`` resolved: whether close pairs get the 3D near-field
+    resistance (:mod:`taichi_hsdem.dem.pairs`)."""
+    f = scene.fluid
+    given = f.pair_mobility
+    if not f.enabled:
+        res.note("fluid.pair_mobility", False, "no fluid")
+        return False
+    if given != AUTO:
+        res.values["fluid.pair_mobility"] = bool(given)
+        return bool(given)
+    why = None
+    if not f.particle_flux:
+        why = "fluid.particle_flux = false (it was fitted with the carried volume)"
+    elif scene.damping.xi != AUTO:
+        why = "damping.xi is given (it was fitted with the sphere's drift)"
+    for k, (sp, s) in enumerate(zip(scene.particles, species)):
+        dh = s.d_eq / f.gap
+        if why:
+            break
+        if sp.drift_ratio != AUTO or sp.carried_fraction != AUTO or sp.xi is not None:
+            why = (f"particles.{k} gives its drift (drift_ratio, carried_fraction or xi): "
+                   f"it was fitted with the sphere's")
+        elif abs(dh - PAIR_MOBILITY_DH) > PAIR_MOBILITY_DH_SPAN:
+            why = (f"particles.{k}: d_eq/H = {dh:.3g}, more than {PAIR_MOBILITY_DH_SPAN:g} "
+                   f"from the 3D pairs' {PAIR_MOBILITY_DH:g}")
+    res.note("fluid.pair_mobility", why is None,
+             f"off: {why}" if why else "the 3D Stokes pairs of spheres at d/H = "
+             f"{PAIR_MOBILITY_DH:g}, fitted on the model's own pair lattices")
+    return why is None
+
+
 def _drift(res: _Resolution, scene: Scene, sp, t: shp.Shape, kp: float, kappa_free: float,
-           k: int) -> tuple[float, float]:
+           k: int, cell: float | None) -> tuple[float, float]:
     """``(xi, carried)`` of species ``k``: its global damping (``damping.xi =
     "auto"``: the plate drag at which a lone particle drifts at ``drift_ratio``
     times the mean fluid speed) and the share of its velocity its cells carry in
-    the pressure solve (1 where it is not used; docs/model.md sections 3.4, 5.2)."""
+    the pressure solve (1 where it is not used; ``"auto"``: the share at which the
+    lone particle, a staircase disk of ``d_eq`` on the fluid grid of ``cell``,
+    leaves the sphere's dipole; docs/model.md sections 3.4, 5.2)."""
     f = scene.fluid
     key = f"particles[{k}]"
     given = sp.xi if sp.xi is not None else (None if scene.damping.xi == "auto"
@@ -262,13 +302,19 @@ def _drift(res: _Resolution, scene: Scene, sp, t: shp.Shape, kp: float, kappa_fr
         elif value == AUTO and tracer:
             values[name] = 1.0
             res.note(f"particles.{k}.{name}", 1.0, what)
+        elif value == AUTO and name == "drift_ratio":
+            values[name] = table[0]
+            res.note(f"particles.{k}.{name}", values[name], f"{why} {what}")
         elif value == AUTO:
-            values[name] = (table[0] if name == "drift_ratio" else
-                            lgs.carried_fraction(kappa_free, kp,
-                                                 values.get("drift_ratio", table[0]),
-                                                 table[1]))
-            res.note(f"particles.{k}.{name}", values[name], f"{why} {what}"
-                     + (f" (B/a^2 = {table[1]:.4g})" if name == "carried_fraction" else ""))
+            lam = values.get("drift_ratio", table[0])
+            cells = t.equivalent_diameter / cell
+            continuum = lgs.carried_fraction(kappa_free, kp, lam, table[1])
+            values[name] = carried_speed(cells, kp / kappa_free, table[1],
+                                         continuum * lam) / lam
+            res.note(f"particles.{k}.{name}", values[name], f"{why} {what} (B/a^2 = "
+                     f"{table[1]:.4g}) on the fluid grid, d_eq/cell = {cells:.4g}"
+                     + ("" if t.kind == "circle" else " (a disk of d_eq)")
+                     + f"; the exact circle would need {continuum:.4g}")
         else:
             values[name] = float(value)
             res.values[f"particles.{k}.{name}"] = values[name]

@@ -187,6 +187,12 @@ class FluidConfig(Config):
                                 "evaluated: at each pressure solve and held in between "
                                 '("solve"), or at every DEM step from the last pressure field '
                                 '("step")', "solve", choices=("solve", "step"))
+    pair_mobility: bool | str = keyfield(
+           "bool", "correct how close particles (surface gap under d_eq) drift together: "
+           "a resistance per pair fitted to 3D Stokes pairs of confined spheres "
+           "(docs/model.md section 3.5); \"auto\": on where it was measured, the carried "
+           "volume with every species' drift_ratio and carried_fraction \"auto\" and d_eq/H "
+           "within 0.05 of 0.875", AUTO, auto=True)
 
 
 _HOURGLASS, _CONVERGING, _POLYGON = ("hourglass",), ("converging",), ("polygon",)
@@ -367,9 +373,9 @@ class SpeciesConfig(Config):
            "float", "share of a moving particle's velocity that its cells carry in the "
            "pressure solve (fluid.particle_flux = true), dimensionless: 1 a tracer of the "
            "depth-averaged flow (no disturbance when it drifts at the fluid's speed), 0 a "
-           "moving obstacle; \"auto\": the share at which a lone drifting particle leaves "
-           "the depth-averaged pressure dipole of a sphere of diameter d_eq at mid-gap "
-           "(3D Stokes)", AUTO, auto=True, ge=0, le=2)
+           "moving obstacle; \"auto\": the share at which a lone drifting particle, a "
+           "disk of d_eq on the fluid grid, leaves the depth-averaged pressure dipole of a "
+           "sphere of diameter d_eq at mid-gap (3D Stokes)", AUTO, auto=True, ge=0, le=2)
     spin_drag: float | str = keyfield(
            "float", "viscous torque per unit spin of a particle of this species about the "
            "plates' normal, beyond what the global damping gives (xi I), N m s: implicit in "
