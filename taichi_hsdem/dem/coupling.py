@@ -343,12 +343,13 @@ class FluidCoupling:
         self.solves = 0
         self.seconds = 0.0
 
-    def apply_forces(self, bodies, batch, particles, templates, only=None):
+    def apply_forces(self, bodies, batch, particles, templates, only=None, pairs=True):
         """Set every body's held fluid force and moment from the last pressure (and,
         with ``fluid.pair_mobility``, the close pairs' resistance); with
         ``only`` ((R,) bool), those of the realizations it flags alone, so that
         re-inserting a body in one realization leaves the others' forces as a run
-        of theirs alone has them (batch equals alone)."""
+        of theirs alone has them (batch equals alone); ``pairs=False`` leaves the
+        pairs' resistance out."""
         b, t = bodies, templates
         which = self._every
         if only is not None:
@@ -357,7 +358,7 @@ class FluidCoupling:
         pressure_forces(b.pack_of(_HELD), batch.running, which, particles.species,
                         t.pack_of(_NODES), self.pres, self.active, *self.grid, self.gap,
                         self.sampling)
-        if self._pairs is not None:
+        if self._pairs is not None and pairs:
             table, xi = self._pairs
             pair_mobility(b.pack_of(_PAIR_BODIES), batch.running, which,
                           particles.pack_of(_PAIR_PARTICLES), xi, self.neighbors.pack(),
@@ -413,7 +414,8 @@ class FluidCoupling:
         present poses and velocities, from their motion since the last solve."""
         b = bodies
         # the last pressure's force at the present poses, for bodies without a history
-        self.apply_forces(bodies, batch, particles, templates)
+        # (the pairs' resistance, a correction of their drift, is left to the solve's)
+        self.apply_forces(bodies, batch, particles, templates, pairs=False)
         R, N = self.v_src.shape[:2]
         if self.terms is None:
             real = self.solver.real

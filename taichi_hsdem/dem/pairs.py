@@ -56,27 +56,53 @@ def _coefficients(table: ti.template(), g):
     return a, b
 
 
+#: Neighbours within the cutoff one pass gathers (a disk has at most 12 of its
+#: own size there); past this many the sum takes them by repeated scans instead.
+_GATHER = 24
+
+
+@ti.func
+def _within(bodies: ti.template(), particles: ti.template(), r, i, j, cutoff):
+    d = 0.5 * (particles.d_eq[i] + particles.d_eq[j])
+    return (j != i and bodies.alive[r, j] != 0
+            and (bodies.x[r, j] - bodies.x[r, i]).norm() < (1.0 + cutoff) * d)
+
+
 @ti.func
 def _next_neighbour(bodies: ti.template(), particles: ti.template(),
                     neighbors: ti.template(), r, i, last, cutoff):
     """The smallest body number above ``last`` of a live body within the
-    cutoff of body ``i`` (-1: none)."""
+    cutoff of body ``i`` (-1: none), from the 5 x 5 cells round it; with it,
+    how many such bodies the cells hold above ``last``."""
     ncx, ncy = neighbors.cell_shape[0], neighbors.cell_shape[1]
     ccap = neighbors.cell_p.shape[2]
     best = -1
-    xi = bodies.x[r, i]
-    cx, cy = cell_of(neighbors, xi)
+    count = 0
+    cx, cy = cell_of(neighbors, bodies.x[r, i])
     for dx, dy in ti.ndrange((-2, 3), (-2, 3)):
         ax, ay = cx + dx, cy + dy
         if 0 <= ax < ncx and 0 <= ay < ncy:
             c = ax * ncy + ay
             for s in range(ti.min(neighbors.cell_n[r, c], ccap)):
                 j = neighbors.cell_p[r, c, s]
-                if j != i and j > last and (best < 0 or j < best) and bodies.alive[r, j] != 0:
-                    d = 0.5 * (particles.d_eq[i] + particles.d_eq[j])
-                    if (bodies.x[r, j] - xi).norm() < (1.0 + cutoff) * d:
+                if j > last and _within(bodies, particles, r, i, j, cutoff):
+                    count += 1
+                    if best < 0 or j < best:
                         best = j
-    return best
+    return best, count
+
+
+@ti.func
+def _add_pair(bodies: ti.template(), particles: ti.template(), table: ti.template(),
+              r, i, j, k):
+    """``k`` (Kxx, Kxy, Kyy) with the term of neighbour ``j`` added."""
+    sep = bodies.x[r, j] - bodies.x[r, i]
+    dist = ti.max(sep.norm(), 1e-30)
+    d = 0.5 * (particles.d_eq[i] + particles.d_eq[j])
+    a, b = _coefficients(table, dist / d - 1.0)
+    e = sep / dist
+    return k + ti.Vector([a + b * (2.0 * e.x * e.x - 1.0), b * 2.0 * e.x * e.y,
+                          a + b * (2.0 * e.y * e.y - 1.0)])
 
 
 @ti.kernel
@@ -88,25 +114,41 @@ def pair_mobility(bodies: _PAIR_BODIES, running: ti.types.ndarray(),
     realizations with ``which[r] != 0`` (module docstring)."""
     for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
         if which[r] != 0 and running[r] != 0 and bodies.alive[r, i] != 0:
-            kxx = 0.0
-            kxy = 0.0
-            kyy = 0.0
-            last = -1
-            while True:
-                j = _next_neighbour(bodies, particles, neighbors, r, i, last, cutoff)
-                if j < 0:
-                    break
-                last = j
-                sep = bodies.x[r, j] - bodies.x[r, i]
-                dist = ti.max(sep.norm(), 1e-30)
-                d = 0.5 * (particles.d_eq[i] + particles.d_eq[j])
-                a, b = _coefficients(table, dist / d - 1.0)
-                e = sep / dist
-                kxx += a + b * (2.0 * e.x * e.x - 1.0)
-                kxy += b * 2.0 * e.x * e.y
-                kyy += a + b * (2.0 * e.y * e.y - 1.0)
-            if last >= 0:
+            k = ti.Vector([0.0, 0.0, 0.0])
+            # one pass gathers the neighbours, an insertion sort orders them
+            # by number (the sum's order)
+            near = ti.Vector([0] * _GATHER, dt=ti.i32)
+            n = 0
+            ncx, ncy = neighbors.cell_shape[0], neighbors.cell_shape[1]
+            ccap = neighbors.cell_p.shape[2]
+            cx, cy = cell_of(neighbors, bodies.x[r, i])
+            for dx, dy in ti.ndrange((-2, 3), (-2, 3)):
+                ax, ay = cx + dx, cy + dy
+                if 0 <= ax < ncx and 0 <= ay < ncy:
+                    c = ax * ncy + ay
+                    for s in range(ti.min(neighbors.cell_n[r, c], ccap)):
+                        j = neighbors.cell_p[r, c, s]
+                        if _within(bodies, particles, r, i, j, cutoff):
+                            if n < _GATHER:
+                                slot = n
+                                while slot > 0 and near[slot - 1] > j:
+                                    near[slot] = near[slot - 1]
+                                    slot -= 1
+                                near[slot] = j
+                            n += 1
+            if n <= _GATHER:
+                for q in range(n):
+                    k = _add_pair(bodies, particles, table, r, i, near[q], k)
+            else:            # crowded (small disks round a large one): scan by number
+                last = -1
+                while True:
+                    j, _ = _next_neighbour(bodies, particles, neighbors, r, i, last, cutoff)
+                    if j < 0:
+                        break
+                    k = _add_pair(bodies, particles, table, r, i, j, k)
+                    last = j
+            if n > 0:
                 vel = bodies.v[r, i]
                 scale = particles.mass[i] * xi[particles.species[i]]
-                bodies.f_fluid[r, i] += scale * vec2(kxx * vel.x + kxy * vel.y,
-                                                     kxy * vel.x + kyy * vel.y)
+                bodies.f_fluid[r, i] += scale * vec2(k[0] * vel.x + k[1] * vel.y,
+                                                     k[1] * vel.x + k[2] * vel.y)
