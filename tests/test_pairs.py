@@ -84,8 +84,8 @@ def test_the_kernel_adds_each_close_pairs_resistance_to_the_held_force():
 
 def test_a_crowded_body_takes_every_neighbour_beyond_the_one_pass_gather():
     """A disk of 2 d ringed by 40 disks of 0.4 d within its cutoff (more than
-    the one-pass gather holds, dem/pairs._GATHER = 24): its term, summed by the
-    scans in number order, is numpy's, as are the small disks' (d/H of the mean
+    the one-pass gather holds, dem/pairs._GATHER = 24): its term, summed over
+    further passes in number order, is numpy's, as are the small disks' (d/H of the mean
     pair outside "auto"'s range: the key set on)."""
     from taichi_hsdem.dem.pairs import _GATHER
     small = [(8.0 + rad * np.cos(a), 4.0 + rad * np.sin(a))

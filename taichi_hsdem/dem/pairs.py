@@ -57,7 +57,7 @@ def _coefficients(table: ti.template(), g):
 
 
 #: Neighbours within the cutoff one pass gathers (a disk has at most 12 of its
-#: own size there); past this many the sum takes them by repeated scans instead.
+#: own size there); past this many, further passes take the next ones.
 _GATHER = 24
 
 
@@ -69,15 +69,15 @@ def _within(bodies: ti.template(), particles: ti.template(), r, i, j, cutoff):
 
 
 @ti.func
-def _next_neighbour(bodies: ti.template(), particles: ti.template(),
-                    neighbors: ti.template(), r, i, last, cutoff):
-    """The smallest body number above ``last`` of a live body within the
-    cutoff of body ``i`` (-1: none), from the 5 x 5 cells round it; with it,
-    how many such bodies the cells hold above ``last``."""
+def _gather(bodies: ti.template(), particles: ti.template(), neighbors: ti.template(),
+            r, i, last, cutoff):
+    """``(near, n)``: the live bodies numbered above ``last`` within the cutoff of
+    body ``i``, from the 5 x 5 cells round it: ``n`` of them, the smallest
+    ``_GATHER`` numbers in ``near`` in increasing order (an insertion sort)."""
+    near = ti.Vector([0] * _GATHER, dt=ti.i32)
+    n = 0
     ncx, ncy = neighbors.cell_shape[0], neighbors.cell_shape[1]
     ccap = neighbors.cell_p.shape[2]
-    best = -1
-    count = 0
     cx, cy = cell_of(neighbors, bodies.x[r, i])
     for dx, dy in ti.ndrange((-2, 3), (-2, 3)):
         ax, ay = cx + dx, cy + dy
@@ -86,10 +86,14 @@ def _next_neighbour(bodies: ti.template(), particles: ti.template(),
             for s in range(ti.min(neighbors.cell_n[r, c], ccap)):
                 j = neighbors.cell_p[r, c, s]
                 if j > last and _within(bodies, particles, r, i, j, cutoff):
-                    count += 1
-                    if best < 0 or j < best:
-                        best = j
-    return best, count
+                    if n < _GATHER or j < near[_GATHER - 1]:
+                        slot = ti.min(n, _GATHER - 1)
+                        while slot > 0 and near[slot - 1] > j:
+                            near[slot] = near[slot - 1]
+                            slot -= 1
+                        near[slot] = j
+                    n += 1
+    return near, n
 
 
 @ti.func
@@ -115,39 +119,18 @@ def pair_mobility(bodies: _PAIR_BODIES, running: ti.types.ndarray(),
     for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
         if which[r] != 0 and running[r] != 0 and bodies.alive[r, i] != 0:
             k = ti.Vector([0.0, 0.0, 0.0])
-            # one pass gathers the neighbours, an insertion sort orders them
-            # by number (the sum's order)
-            near = ti.Vector([0] * _GATHER, dt=ti.i32)
-            n = 0
-            ncx, ncy = neighbors.cell_shape[0], neighbors.cell_shape[1]
-            ccap = neighbors.cell_p.shape[2]
-            cx, cy = cell_of(neighbors, bodies.x[r, i])
-            for dx, dy in ti.ndrange((-2, 3), (-2, 3)):
-                ax, ay = cx + dx, cy + dy
-                if 0 <= ax < ncx and 0 <= ay < ncy:
-                    c = ax * ncy + ay
-                    for s in range(ti.min(neighbors.cell_n[r, c], ccap)):
-                        j = neighbors.cell_p[r, c, s]
-                        if _within(bodies, particles, r, i, j, cutoff):
-                            if n < _GATHER:
-                                slot = n
-                                while slot > 0 and near[slot - 1] > j:
-                                    near[slot] = near[slot - 1]
-                                    slot -= 1
-                                near[slot] = j
-                            n += 1
-            if n <= _GATHER:
-                for q in range(n):
+            # the neighbours in number order (the sum's order), _GATHER at a time
+            last = -1
+            found = 0
+            while True:
+                near, n = _gather(bodies, particles, neighbors, r, i, last, cutoff)
+                for q in range(ti.min(n, _GATHER)):
                     k = _add_pair(bodies, particles, table, r, i, near[q], k)
-            else:            # crowded (small disks round a large one): scan by number
-                last = -1
-                while True:
-                    j, _ = _next_neighbour(bodies, particles, neighbors, r, i, last, cutoff)
-                    if j < 0:
-                        break
-                    k = _add_pair(bodies, particles, table, r, i, j, k)
-                    last = j
-            if n > 0:
+                found += n
+                if n <= _GATHER:
+                    break
+                last = near[_GATHER - 1]
+            if found > 0:
                 vel = bodies.v[r, i]
                 scale = particles.mass[i] * xi[particles.species[i]]
                 bodies.f_fluid[r, i] += scale * vec2(k[0] * vel.x + k[1] * vel.y,
