@@ -24,7 +24,8 @@ import numpy as np
 SPHERE_IN_GAP = Path(__file__).with_name("data") / "sphere_in_gap.csv"
 SPHERE_SPIN = Path(__file__).with_name("data") / "sphere_spin.csv"
 PAIR_MOBILITY_TABLE = Path(__file__).with_name("data") / "pair_mobility.csv"
-#: Beyond this surface gap (over the pair's mean d_eq) the pair resistance is zero.
+#: Beyond this surface gap (over the pair's mean d_eq) the pair resistance is zero:
+#: the last knot of the table tools/pair_mobility_fit.py writes, where it holds 0.
 PAIR_CUTOFF = 1.0
 
 
@@ -158,7 +159,8 @@ def _sphere_table() -> np.ndarray:
 def pair_mobility_table() -> np.ndarray:
     """``(g, alpha, beta)`` rows of :data:`PAIR_MOBILITY_TABLE`, by the surface gap
     ``g`` over d: the close pairs' resistance of ``fluid.pair_mobility``
-    (:mod:`taichi_hsdem.dem.pairs`; written by ``tools/pair_mobility_fit.py``)."""
+    (:mod:`taichi_hsdem.dem.pairs`; written by ``tools/pair_mobility_fit.py``). The
+    last knot is the cutoff, :data:`PAIR_CUTOFF`, with zeros."""
     return _table(PAIR_MOBILITY_TABLE, ("g", "alpha", "beta"))
 
 

@@ -127,9 +127,8 @@ class Simulation:
         self.stalled_rebuilds = 0
         self._stall = state.array(np.zeros(STALL_RUNNING + R, dtype=np.int32), state.ti.i32)
         self._state_buffer = state.array(np.zeros((R, N, integrate.STATE_COLUMNS)))
-        self.fluid = coupling.FluidCoupling(m, R, N) if self.scene.fluid.enabled else None
-        if self.fluid is not None:
-            self.fluid.neighbors = self.neighbors
+        self.fluid = (coupling.FluidCoupling(m, R, N, self.neighbors, self.materials)
+                      if self.scene.fluid.enabled else None)
         self._forces_every_step = (self.fluid is not None
                                    and self.scene.fluid.force_update == "step")
         S = len(m.species)

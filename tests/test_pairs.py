@@ -5,7 +5,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from conftest import make_sim
 from taichi_hsdem import load_scene
@@ -50,11 +49,7 @@ def held_difference(sim):
     fl, b = sim.fluid, sim.bodies
 
     def held(pairs_on):
-        saved = fl._pairs
-        if not pairs_on:
-            fl._pairs = None
-        fl.apply_forces(b, sim.batch, sim.particles, sim.templates)
-        fl._pairs = saved
+        fl.apply_forces(b, sim.batch, sim.particles, sim.templates, pairs=pairs_on)
         return b.f_fluid.to_numpy()[0].astype(float)
     return held(True) - held(False)
 

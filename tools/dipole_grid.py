@@ -16,7 +16,6 @@ give it for every ``c``.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -25,6 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from taichi_hsdem import SceneError, load_scene  # noqa: E402
+from taichi_hsdem.fluid.grid_dipole import ring_fit  # noqa: E402
 from taichi_hsdem.laws import inclusion_dipole, sphere_in_gap  # noqa: E402
 
 
@@ -51,11 +51,7 @@ def grid_dipole(h: float, d: float, k_free: float, k_p: float, carried_speed: fl
             p, _ = solver.solve(kappa, carried=carried, occupied=inside)
         else:
             p, _ = solver.solve(kappa)
-        r = np.hypot(dx, dy)
-        ring = (r > 1.5 * d) & (r < 3.0 * d)
-        images = np.real(math.pi / W / np.tanh(math.pi * (dx + 1j * dy) / W))
-        coef = np.linalg.lstsq(np.column_stack([np.ones(ring.sum()), dx[ring], images[ring]]),
-                               p[ring], rcond=None)[0]
+        coef = ring_fit(p, dx, dy, d, W)
         values.append(coef[2] / coef[1] / (0.25 * d * d))
     return float(np.mean(values)), float(np.std(values))
 

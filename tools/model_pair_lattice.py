@@ -163,11 +163,12 @@ class PeriodicLattice:
                 "column_flux_spread": max(r["flux_spread"] for r in results)
                 / abs(results[0]["flux"])}
 
-    def pair_resistance(self, centres, table, cutoff):
+    def pair_resistance(self, centres, table):
         """``K`` (2 nb x 2 nb, block diagonal) of ``fluid.pair_mobility``
         (taichi_hsdem/dem/pairs.py) for disks at ``centres``: every other disk and
-        every periodic image (a disk's own included) within the cutoff."""
-        nb, d = len(centres), 2.0 * self.radius
+        every periodic image (a disk's own included) within the cutoff, the
+        ``table``'s last knot."""
+        nb, d, cutoff = len(centres), 2.0 * self.radius, float(table[-1, 0])
         Lx, Ly = self.nx * self.h, self.ny * self.h
         c = np.asarray(centres, float)
         K = np.zeros((2 * nb, 2 * nb))
@@ -197,9 +198,9 @@ class PeriodicLattice:
 
     def solve(self, centres, pair=None):
         """Steady drift of the disks at ``centres`` (cell frame, metres); ``pair``:
-        ``(table, cutoff)`` of the close pairs' resistance, or None."""
+        the close pairs' resistance table, or None."""
         parts = self.pieces(centres)
-        K = None if pair is None else self.pair_resistance(centres, *pair)
+        K = None if pair is None else self.pair_resistance(centres, pair)
         vel, U = self.drift(parts, K)
         owner = parts["owner"]
         return {"V": vel[:, 0].tolist(), "Vy": vel[:, 1].tolist(), "U": U,
@@ -257,18 +258,9 @@ def run(args):
     lat = PeriodicLattice(model, nx, ny)
     nb = len(base)
     phi_actual = nb * math.pi * lat.radius ** 2 / (nx * ny * h * h)
-    k = int(round(math.sqrt(args.offsets)))
-    grid = (np.arange(k) + 0.5) / k
-    offs = np.array([(u, v) for u in grid for v in grid])   # stratified: k x k in a cell
     t0 = time.perf_counter()
     pair = pair_setting(model, args)
-    recs = []
-    # the pair's centre at a random place in its cell (the lattice is cell-periodic:
-    # only the offset within a grid cell matters)
-    for off in offs:
-        X0 = (0.5 * nx + off[0]) * h
-        Y0 = (0.5 * ny + off[1]) * h
-        recs.append(lat.solve([(X0 + x, Y0 + y) for x, y in base], pair))
+    recs = [lat.solve(centres, pair) for centres in placements(lat, base, args.offsets)]
     vu = np.array([r["V_over_U"] for r in recs])
     out = {"scene": SCENE, "set": args.set, "lone": args.lone,
            "arrangement": None if args.lone else args.arrangement,
@@ -276,7 +268,7 @@ def run(args):
            "phi_actual": phi_actual, "nx": nx, "ny": ny, "h": h, "d_over_h": s.d_eq / h,
            "d_over_H": s.d_eq / float(model.scene.fluid.gap), "carried": lat.c, "xi": lat.xi, "kappa_p_over_free": lat.kp / lat.kf,
            "pair_mobility": pair is not None,
-           "offsets": len(offs), "V_over_U": float(vu.mean()),
+           "offsets": len(recs), "V_over_U": float(vu.mean()),
            "V_over_U_std": float(vu.std()), "V_over_U_sem": float(vu.std() / math.sqrt(len(vu))),
            "Vy_over_V_rms": float(np.sqrt(np.mean([np.mean(np.square(r["Vy"]))
                                                    / np.mean(np.square(r["V"]))
@@ -286,6 +278,17 @@ def run(args):
            "cells_inside_mean": float(np.mean([np.mean(r["cells_inside"]) for r in recs])),
            "wall_s": time.perf_counter() - t0}
     return out
+
+
+def placements(lat, base, offsets):
+    """The disks' centres (metres) for each of ``offsets`` positions of the layout
+    ``base`` in its grid cell, a stratified k x k grid (k = sqrt(offsets)) about
+    the periodic cell's middle: the lattice is cell-periodic, so only the offset
+    within a grid cell matters."""
+    k = int(round(math.sqrt(offsets)))
+    grid = (np.arange(k) + 0.5) / k
+    return [[((0.5 * lat.nx + u) * lat.h + x, (0.5 * lat.ny + v) * lat.h + y) for x, y in base]
+            for u in grid for v in grid]
 
 
 def pair_coefficients(table, g):
@@ -300,14 +303,14 @@ def pair_coefficients(table, g):
 
 
 def pair_setting(model, args):
-    """``(table, cutoff)`` of the pair resistance the lattice applies (``--pair-mobility``:
+    """The pair resistance's table the lattice applies (``--pair-mobility``:
     ``auto`` as the scene resolves ``fluid.pair_mobility``), or None."""
     choice = getattr(args, "pair_mobility", "auto")
     on = model.pair_mobility if choice == "auto" else choice == "on"
     if not on:
         return None
-    from taichi_hsdem.laws import PAIR_CUTOFF, pair_mobility_table
-    return pair_mobility_table(), PAIR_CUTOFF
+    from taichi_hsdem.laws import pair_mobility_table
+    return pair_mobility_table()
 
 
 def periodic_operator(T, fa, fb, is_x, n):

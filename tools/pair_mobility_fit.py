@@ -1,12 +1,13 @@
 """Fit the close pairs' resistance of ``fluid.pair_mobility`` to the 3D Stokes pairs.
 
-The depth-averaged model's pairs of disks drift side by side up to 16 % faster
-than a lone disk and in line up to 9 % slower, where confined spheres (3D Stokes,
+The depth-averaged model's pairs of disks drift side by side up to 14 % faster
+than a lone disk and in line up to 8 % slower (with the default carried
+fraction), where confined spheres (3D Stokes,
 ``taichi_hsdem/data/sphere_pair_lattice.csv``) move within 5 % of a lone one.
 ``fluid.pair_mobility`` gives each body the resistance
 ``m xi (I - K_i)``, ``K_i = sum_j alpha(g) I + beta(g) (2 e e^T - I)`` over its
-neighbours within ``g < PAIR_CUTOFF`` (taichi_hsdem/dem/pairs.py), ``alpha`` and
-``beta`` piecewise linear in the surface gap ``g`` between knots. This tool finds
+neighbours within ``g < PAIR_CUTOFF`` (taichi_hsdem/laws.py, the table's last knot;
+taichi_hsdem/dem/pairs.py), ``alpha`` and ``beta`` piecewise linear in the surface gap ``g`` between knots. This tool finds
 the knots' values: the model's own pair lattices (tools/model_pair_lattice.py:
 the scene's grid, permeability, carried flux and node forces, the steady drift,
 ``--offsets`` positions in a cell), each pair's drift over its lone lattice's at
@@ -60,16 +61,12 @@ class Lattice:
         self.lat = mpl.PeriodicLattice(model, nx, ny)
         h = self.lat.h
         self.phi = len(base) * math.pi * self.lat.radius ** 2 / (nx * ny * h * h)
-        k = int(round(math.sqrt(args.offsets)))
-        grid = (np.arange(k) + 0.5) / k
-        self.centres = [[((0.5 * nx + u) * h + x, (0.5 * ny + v) * h + y) for x, y in base]
-                        for u in grid for v in grid]
+        self.centres = mpl.placements(self.lat, base, args.offsets)
         self.parts = [self.lat.pieces(c) for c in self.centres]
 
     def v_over_u(self, table):
         # K depends on the centres' differences alone: the same at every offset
-        K = (None if table is None else
-             self.lat.pair_resistance(self.centres[0], table, PAIR_CUTOFF))
+        K = None if table is None else self.lat.pair_resistance(self.centres[0], table)
         out = []
         for p in self.parts:
             vel, U = self.lat.drift(p, K)

@@ -36,7 +36,7 @@ from ..fluid.gmg import REAL, BodyTerms, TaichiPressureSolver
 from . import state
 from .integrate import plate_rate
 from .pairs import _PAIR_BODIES, _PAIR_PARTICLES, pair_mobility
-from ..laws import PAIR_CUTOFF, pair_mobility_table
+from ..laws import pair_mobility_table
 from .kmath import cross, exp_neg, node_world, rot, rot_t, sin_cos, spin, template_sample
 from ..layout import SAMPLING
 
@@ -284,9 +284,12 @@ class FluidCoupling:
         The resolved set-up (its fluid grid, boundary condition, solver settings).
     n_real, n_part : int
         Realizations and particles per realization.
+    neighbors, materials : NeighborList, Materials
+        The batch's broad phase and per-species damping, which the close pairs'
+        resistance (``fluid.pair_mobility``) reads.
     """
 
-    def __init__(self, model, n_real: int, n_part: int):
+    def __init__(self, model, n_real: int, n_part: int, neighbors, materials):
         fl = model.scene.fluid
         g = model.geometry
         nx, ny = model.fluid_shape
@@ -314,12 +317,10 @@ class FluidCoupling:
         self._every = state.array(np.ones(n_real, dtype=np.int32), ti.i32)
         self._chosen = state._zeros(n_real, ti.i32)
         # the close pairs' resistance (fluid.pair_mobility, dem/pairs.py): the
-        # broad phase's cells find the pairs (``neighbors``, set by the Simulation)
-        self.neighbors = None
-        self._pairs = None
-        if model.pair_mobility:
-            self._pairs = (state.array(pair_mobility_table()),
-                           state.array(np.array([s.xi for s in model.species])))
+        # broad phase's cells find the pairs, the species' damping scales it
+        self.neighbors = neighbors
+        self._xi = materials.xi
+        self._pair_table = state.array(pair_mobility_table()) if model.pair_mobility else None
         # the implicit carried volume (fluid.flux_coupling = "implicit"): the
         # bodies' terms of the pressure solve, made on the first update
         self.implicit = bool(fl.particle_flux) and fl.flux_coupling == "implicit"
@@ -358,11 +359,10 @@ class FluidCoupling:
         pressure_forces(b.pack_of(_HELD), batch.running, which, particles.species,
                         t.pack_of(_NODES), self.pres, self.active, *self.grid, self.gap,
                         self.sampling)
-        if self._pairs is not None and pairs:
-            table, xi = self._pairs
+        if self._pair_table is not None and pairs:
             pair_mobility(b.pack_of(_PAIR_BODIES), batch.running, which,
-                          particles.pack_of(_PAIR_PARTICLES), xi, self.neighbors.pack(),
-                          table, PAIR_CUTOFF)
+                          particles.pack_of(_PAIR_PARTICLES), self._xi, self.neighbors.pack(),
+                          self._pair_table)
 
     def forget_velocity(self, r: int, i: int):
         """Body ``i`` of realization ``r`` was re-inserted: it carries no flux yet."""

@@ -2,15 +2,15 @@
 docs/model.md section 3.5).
 
 Two depth-averaged Darcy disks close together act as one elongated obstacle:
-side by side across the flow they speed each other up by 14-16 % at a surface
-gap of 0.05 d, in line they slow each other by 8-9 %, where confined spheres in
-3D Stokes move within 3 % of a lone one either way. The correction is a
+side by side across the flow they speed each other up by 12-14 % at a surface
+gap of 0.05 d, in line they slow each other by 7-8 %, where confined spheres in
+3D Stokes move within 5 % of a lone one either way. The correction is a
 resistance per close pair: body ``i`` drifts as if its plate drag were
 ``m xi (I - K_i)``, ``K_i = sum_j alpha(g) I + beta(g) (2 e e^T - I)`` over its
-neighbours ``j`` within ``g < PAIR_CUTOFF`` (``g`` the surface gap over the
-mean ``d_eq`` of the two, ``e`` the unit vector between their centres), with
+neighbours ``j`` closer than the table's last knot (``g`` the surface gap over
+the mean ``d_eq`` of the two, ``e`` the unit vector between their centres), with
 ``alpha``, ``beta`` piecewise linear in ``g`` on the knots of
-:data:`taichi_hsdem.laws.PAIR_MOBILITY` (fitted so that the model's pair
+:func:`taichi_hsdem.laws.pair_mobility_table` (fitted so that the model's pair
 lattices drift as the 3D Stokes ones, ``tools/pair_mobility_fit.py``). It is
 held between fluid updates as the pressure force is: the force
 ``m xi K_i v_i`` from the velocity at the update joins the held fluid force,
@@ -18,22 +18,20 @@ and at steady drift ``m xi v = F + m xi K v`` is that resistance. A body at
 rest feels none of it: the pressure force on held bodies is unchanged.
 
 Neighbours come from the broad phase's cells (:mod:`.neighbors`), the 5 x 5
-cells round the body (1.25 d each at least: the bodies binned at the last
-build lie within a quarter diameter of where they are now), taken in the
+cells round the body (1.25 d each at least: a body binned at the last build
+lies within half the Verlet skin, d/8, of where it is now), taken in the
 order of their numbers, so that the sum does not depend on how the cells were
 filled (a GPU fills them in any order) nor on the other realizations.
 """
 
 from ..backend import ti  # sets the environment before Taichi loads
 from . import state
-from ..laws import PAIR_CUTOFF  # noqa: F401  (the callers pass it)
 from .neighbors import NEIGHBORS, cell_of
 
 vec2 = ti.math.vec2
 
 _PAIR_BODIES = state.Bodies.part("x", "v", "alive", "f_fluid")
 _PAIR_PARTICLES = state.Particles.part("species", "mass", "d_eq")
-
 
 
 @ti.func
@@ -112,10 +110,11 @@ def _add_pair(bodies: ti.template(), particles: ti.template(), table: ti.templat
 @ti.kernel
 def pair_mobility(bodies: _PAIR_BODIES, running: ti.types.ndarray(),
                   which: ti.types.ndarray(), particles: _PAIR_PARTICLES,
-                  xi: ti.types.ndarray(), neighbors: NEIGHBORS, table: ti.types.ndarray(),
-                  cutoff: float):
+                  xi: ti.types.ndarray(), neighbors: NEIGHBORS, table: ti.types.ndarray()):
     """Add ``m xi K_i v_i`` to the held fluid force of every live body of the
-    realizations with ``which[r] != 0`` (module docstring)."""
+    realizations with ``which[r] != 0`` (module docstring); ``xi`` per species
+    (``Materials.xi``)."""
+    cutoff = table[table.shape[0] - 1, 0]
     for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
         if which[r] != 0 and running[r] != 0 and bodies.alive[r, i] != 0:
             k = ti.Vector([0.0, 0.0, 0.0])

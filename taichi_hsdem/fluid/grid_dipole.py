@@ -73,12 +73,21 @@ def _fits(d_cells: float, kappa_ratio: float) -> np.ndarray:
         x = spla.splu(A.tocsc()).solve(rhs)
         p = np.full((nx * ny, 2), np.nan)
         p[fv._cells] = x
-        ring = ((r > RING[0] * d) & (r < RING[1] * d)).ravel()
-        images = np.real(math.pi / W / np.tanh(math.pi * (dx + 1j * dy) / W)).ravel()
-        basis = np.column_stack([np.ones(ring.sum()), dx.ravel()[ring], images[ring]])
-        coef = np.linalg.lstsq(basis, p[ring], rcond=None)[0]      # (3, 2)
-        out[n] = coef[1:].T
+        out[n] = ring_fit(p, dx.ravel(), dy.ravel(), d, W)[1:].T
     return out
+
+
+def ring_fit(p, dx, dy, d, width):
+    """``(a0, a1, a2)``, the least-squares fit ``p = a0 + a1 x + a2 f(x, y)`` on
+    the ring ``RING`` (diameters ``d``) round a disk, ``dx``, ``dy`` the cells'
+    offsets from its centre, ``f`` the dipole ``x / r^2`` with its images in side
+    walls ``width`` apart; ``B / a^2 = a2 / a1 / a^2``. ``p`` may hold several
+    fields as columns (then one row of coefficients per field)."""
+    r = np.hypot(dx, dy)
+    ring = (r > RING[0] * d) & (r < RING[1] * d)
+    images = np.real(math.pi / width / np.tanh(math.pi * (dx + 1j * dy) / width))
+    basis = np.column_stack([np.ones(ring.sum()), dx[ring], images[ring]])
+    return np.linalg.lstsq(basis, p[ring], rcond=None)[0]
 
 
 def grid_dipole(d_cells: float, kappa_ratio: float, carried_speed: float) -> float:

@@ -243,9 +243,9 @@ def _pair_mobility(res: _Resolution, scene: Scene, species) -> bool:
     elif scene.damping.xi != AUTO:
         why = "damping.xi is given (it was fitted with the sphere's drift)"
     for k, (sp, s) in enumerate(zip(scene.particles, species)):
-        dh = s.d_eq / f.gap
         if why:
             break
+        dh = s.d_eq / f.gap
         if sp.drift_ratio != AUTO or sp.carried_fraction != AUTO or sp.xi is not None:
             why = (f"particles.{k} gives its drift (drift_ratio, carried_fraction or xi): "
                    f"it was fitted with the sphere's")
