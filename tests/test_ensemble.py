@@ -66,7 +66,7 @@ def in_one_group(make, lanes, monkeypatch):
         monkeypatch.setattr(limits, "thread_share", lambda: 1)
     sim = make()
     if lanes is True:
-        assert sim.fluid.solver._lanes.geo.to_numpy()[0, 3] == 1     # one group
+        assert sim.fluid.solver._lanes.groups == 1     # one group
     return sim
 
 
@@ -153,6 +153,46 @@ def test_batch_equals_alone_through_escapes_refeeds_and_clogs(name, lanes, monke
         for key in ("x", "theta", "v", "omega", "alive"):
             np.testing.assert_array_equal(alone.final[key][0], batch.final[key][k],
                                           err_msg=key)
+
+
+@pytest.mark.parametrize("lanes", ["auto", True])
+def test_a_stopped_realization_is_left_out_of_the_solves_and_nothing_changes(lanes,
+                                                                            monkeypatch):
+    """Once a realization has stopped (here it clogs, run.stop_at_clog) and been
+    solved once since, the pressure solves leave it out (dem/coupling.py:
+    FluidCoupling.skip_stopped; nothing of it moves, so its solve would take no
+    iteration). The run's results, series, flow rows, final state and final
+    pressure are those of the same batch solved whole at every solve, with one
+    realization per thread and in one group's lanes (which then hold the
+    running realization alone)."""
+    from taichi_hsdem.dem.coupling import FluidCoupling
+
+    def run(skip):
+        monkeypatch.setattr(FluidCoupling, "skip_stopped", skip)
+        sim = in_one_group(lambda: Simulation(load_scene(
+            VANI, ["feed.inlet=[0.0, 0.0005]", "fluid.workers=1", *DISKS, "run.t_end=0.6",
+                   "run.seed=0", "run.realizations=2"])), lanes, monkeypatch)
+        solver, asked = sim.fluid.solver, []
+        solve = solver.solve
+
+        def spy(*args, only=None, **kwargs):
+            asked.append(None if only is None else np.array(only))
+            return solve(*args, only=only, **kwargs)
+        monkeypatch.setattr(solver, "solve", spy)
+        return sim, sim.run(), asked
+
+    sim, res, asked = run(True)
+    whole_sim, whole, asked_whole = run(False)
+    rows = res.summary["realizations"]
+    assert [row["clogged"] for row in rows].count(True) == 1, rows   # one stops early
+    assert sum(only is not None and not only.all() for only in asked) >= 3
+    assert all(only is None for only in asked_whole)
+    assert rows == whole.summary["realizations"]
+    assert res.series == whole.series
+    assert sim.run_state.flow == whole_sim.run_state.flow
+    for key in ("x", "theta", "v", "omega", "alive"):
+        np.testing.assert_array_equal(res.final[key], whole.final[key], err_msg=key)
+    np.testing.assert_array_equal(sim.fluid.pressure, whole_sim.fluid.pressure)
 
 
 def test_t_clog_is_the_first_static_arch_after_the_last_escape():

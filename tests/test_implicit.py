@@ -150,6 +150,41 @@ def test_moving_bodies_side_by_side_give_the_bits_of_one_realization_per_thread(
     assert not np.array_equal(answers[True][0][0], answers[True][0][1])
 
 
+@pytest.mark.parametrize("way", ["rows", "realizations", "lanes"])
+def test_only_solves_the_realizations_named_and_leaves_the_others(way, monkeypatch):
+    """``solve(..., only=)``: the realizations outside ``only`` take no iteration
+    and keep their last pressure and fluxes, though a solve would now change
+    them; those inside get the bits a whole solve gives them (in the lanes
+    packed into other groups and lanes: three realizations in two groups where
+    five filled them). A later whole solve solves every one again."""
+    shape, R = (45, 29), 5
+    active = np.ones(shape, bool)
+    owner, centre, kappa, mobility, drift = bodies_on(shape, R, seed=3)
+    monkeypatch.setattr(TaichiPressureSolver, "lanes", way == "lanes")
+    parallel = "rows" if way == "rows" else "realizations"
+    a, b = (TaichiPressureSolver(active, DX, DY, ETA, FLOW, n_batch=R, gap=GAP,
+                                 parallel=parallel) for _ in range(2))
+    assert (a._lanes is not None) == (way == "lanes")
+    first = device(owner, centre, mobility, drift)
+    p_a1, info_a1 = a.solve(kappa, bodies=first)
+    b.solve(kappa, bodies=first)
+    then = device(owner, centre, mobility, -drift)     # a new answer everywhere
+    only = np.array([True, False, True, False, True])
+    p_a2, info_a2 = a.solve(kappa, bodies=then, only=only)
+    p_b2, info_b2 = b.solve(kappa, bodies=then)
+    np.testing.assert_array_equal(p_a2[only], p_b2[only])
+    np.testing.assert_array_equal(p_a2[~only], p_a1[~only])
+    assert not np.allclose(p_b2[~only], p_a1[~only])
+    np.testing.assert_array_equal(info_a2.flux_in[~only], info_a1.flux_in[~only])
+    np.testing.assert_array_equal(info_a2.flux_in[only], info_b2.flux_in[only])
+    assert info_a2.iterations == info_b2.iterations > 0
+    p_a3, _ = a.solve(kappa, bodies=then)             # every one again
+    scale = np.nanmax(np.abs(p_b2))
+    np.testing.assert_allclose(p_a3[~only], p_b2[~only], rtol=0, atol=1e-5 * scale)
+    with pytest.raises(ValueError, match="only must have shape"):
+        a.solve(kappa, bodies=then, only=[True, False])
+
+
 def test_bad_body_arrays_are_refused():
     shape = (20, 12)
     active = np.ones(shape, bool)

@@ -420,3 +420,20 @@ def test_bench_order_times_both_numberings_of_the_same_disks():
     assert 0.0 <= row["end_positions_apart_d"] < 1e-3
     assert all(v > 0 for v in row["ms_per_step"].values())
     assert len(row["ratio_cells_over_placed"]) == 1
+
+
+def test_bench_stopped_pairs_the_two_ways_solve_by_solve():
+    """tools/bench_stopped.py: the batch run with the stopped realizations left out
+    of the solves and solved whole, in turn in one process; the two end in the
+    same positions (the tool checks it) and every solve is timed both ways."""
+    tool = ROOT / "tools" / "bench_stopped.py"
+    proc = subprocess.run([sys.executable, str(tool), "--realizations", "2", "--t-end",
+                           "0.03", "--repeats", "1"], capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0].startswith("2 realizations,") and "(the same bits)" in lines[0]
+    band = next(line for line in lines if line.lstrip().startswith("2-  2"))
+    solves, left, whole, ratio = (float(v) for v in band.split()[2:])
+    assert solves >= 2 and left > 0 and whole > 0 and ratio > 0
+    assert lines[-1].startswith("whole runs (s), left out / whole:")

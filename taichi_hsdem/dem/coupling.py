@@ -340,6 +340,7 @@ class FluidCoupling:
         self._pressure_device = None               # the same, on the device (gmg)
         self.last_info = None                      # its SolveInfo
         self._kappa_solved = None
+        self._settled = np.zeros(n_real, dtype=bool)  # stopped, and solved since
         self.updates = 0
         self.solves = 0
         self.seconds = 0.0
@@ -488,9 +489,14 @@ class FluidCoupling:
         if self.on_device:
             terms = (self._body_terms(bodies, batch, particles, templates, materials)
                      if implicit else None)
+            only = None
+            if self.skip_stopped:
+                running = batch.running.to_numpy() != 0
+                only = running | ~self._settled
+                self._settled = ~running
             pres, info = self.solver.solve(self.kappa if kappa is None else kappa,
                                            carried=carried, occupied=occupied, host=False,
-                                           bodies=terms)
+                                           bodies=terms, only=only)
             self._pressure_device, self._pressure = pres, None
             finite_or_zero(pres, self.pres)
         else:
@@ -503,6 +509,13 @@ class FluidCoupling:
         self.last_info = info
         self.apply_forces(bodies, batch, particles, templates)
         return info
+
+    #: Leave a stopped realization out of the pressure solves once it has been
+    #: solved since it stopped: nothing of it moves any more (the DEM skips it,
+    #: its bodies are out of play), so its solve would take no iteration and
+    #: leave its pressure as it is. False solves every realization every time
+    #: (the same bits).
+    skip_stopped = True
 
     @property
     def pressure(self) -> np.ndarray:

@@ -33,9 +33,38 @@ order, each cell's over its four faces, in one thread each: a realization's
 result depends on nothing else in the batch, nor on how the threads are laid out.
 Package-internal: :mod:`.gmg` is the API."""
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
+from typing import NamedTuple
+
 from ..backend import ti
 from ._gmg_cycle import (REAL, _BASE, _K_DX, _K_DY, _NX, _NY, _RHS, _SOL, _Cells, _Consts,
                          _Field, _Ints, _Rows, _index)
+
+
+class BodyTerms(NamedTuple):
+    """The moving bodies of the implicit carried-volume coupling, for
+    :meth:`.gmg.TaichiPressureSolver.solve` (the equations: the module docstring;
+    docs/scene.md, "Carried volume"): Taichi ndarrays, ``R`` realizations of
+    ``N`` bodies.
+
+    Attributes
+    ----------
+    owner : int32 (R, nx, ny)
+        The body whose outline holds each cell's centre, -1 for none.
+    centre : (R, N, 2), the solve's float type (float64 where the backend has it)
+        Each body's centre in cell units: cell ``(i, j)``'s centre is at ``(i, j)``.
+    mobility : (R, N, 3)
+        ``H M``: over the next fluid interval the body moves at ``drift -
+        mobility S^T (p - p_0)`` (``v_x, v_y, omega``; 0 for a body out of play),
+        ``p_0`` the initial guess.
+    drift : (R, N, 3)
+        That velocity at ``p = p_0``.
+    """
+
+    owner: object
+    centre: object
+    mobility: object
+    drift: object
+
 
 _Owner = ti.types.ndarray(dtype=ti.i32, ndim=3)   # (R, nx, ny): a body's number or -1
 

@@ -7,8 +7,8 @@ from ..backend import ti
 from ._gmg_cycle import (N_FLAGS, OVERCORRECTION, REAL, _ADIR, _ALPHA, _B, _BB, _BETA, _CHECK,
                          _Cells, _Chol, _FIRST, _TX, _TY, _Consts, _DIR, _Field, _Grid, _INLET,
                          _ITERS, _Ints, _K_INFLOW, _K_PREF, _K_TOL2, _NX, _NY, _Ops, _PW, _RES,
-                         _RHS, _RR, _RUNNING, _RZ, _Rows, _SOL, _Sides, _TASK, _UNDRIVEN, _X,
-                         _apply, _cycle_of, _diagonal, _index, _lanes, _segment, _segments)
+                         _RHS, _RR, _RUNNING, _RZ, _Rows, _SKIP, _SOL, _Sides, _TASK, _UNDRIVEN,
+                         _X, _apply, _cycle_of, _diagonal, _index, _lanes, _segment, _segments)
 from ._gmg_bodies import Terms, _product, _product_of
 
 #: The float32 solve also stops once its true residual is below this fraction of
@@ -291,11 +291,12 @@ def _residual_check(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows,
     (:mod:`._gmg_bodies`) apply."""
     R, n = flags.shape[0], geo[0, _NX] * _segments(geo[0, _NY])  # segment sums each
     for r in range(R):
-        flags[r, _RUNNING] = 1
+        flags[r, _RUNNING] = 1 - flags[r, _SKIP]
         flags[r, _ITERS] = 0
     _segment_sums(cg, _RHS, cg, _RHS, part, 1, geo, flags, _RUNNING)
     for r in range(R):
-        _set_norm_b(part, state, flags, r, n)
+        if flags[r, _RUNNING]:
+            _set_norm_b(part, state, flags, r, n)
     _for_cells(_clear, op, mg, cg, state, flags, geo, cells, _RUNNING)
     _true_residual(op, mg, cg, part, state, flags, geo, consts, maxiter, cells, bodies, terms,
                    _RUNNING)
@@ -376,9 +377,10 @@ def _solve_each(op: _Ops, mg: _Rows, cg: _Rows, part: _Rows, state: _Rows, flags
                 geo: _Ints, chol: _Chol, consts: _Consts, maxiter: ti.i32,
                 bodies: ti.template(), terms: Terms):
     """The whole CG solve, one thread per realization: the steps of
-    _residual_check, _cg_direction and _cg_step with _cycle_of, in one launch."""
+    _residual_check, _cg_direction and _cg_step with _cycle_of, in one launch
+    (a realization with flag _SKIP left as it is: _mark)."""
     for t in range(flags.shape[0] * _TASK):  # one realization per thread (see _TASK)
-        if t % _TASK == 0:
+        if t % _TASK == 0 and flags[t // _TASK, _SKIP] == 0:
             _solve_one(op, mg, cg, part, state, flags, geo, chol, t // _TASK, consts, maxiter,
                        bodies, terms)
 
@@ -496,3 +498,16 @@ def _copy_row(cg: _Rows, src: ti.i32, dst: ti.i32):
     """``cg[dst] = cg[src]`` (the initial guess kept and put back, gmg.solve)."""
     for k in range(cg.shape[1]):
         cg[dst, k] = cg[src, k]
+
+
+@ti.kernel
+def _mark(flags: _Ints, only: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    """Flag _SKIP of every realization with ``only[r] == 0``, which no kernel of
+    the next solve touches (not running, no iterations, nothing to check)."""
+    for r in range(flags.shape[0]):
+        skip = 1 if only[r] == 0 else 0
+        flags[r, _SKIP] = skip
+        if skip:
+            flags[r, _RUNNING] = 0
+            flags[r, _ITERS] = 0
+            flags[r, _CHECK] = 0

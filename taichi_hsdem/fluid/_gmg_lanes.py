@@ -38,8 +38,6 @@ from ._gmg_setup import _upload
 #: the solve does not read, is left out).
 _LPW = 4
 _CG_ROWS = 5
-#: Column of the lanes' level table holding the group count (after _OFF, _NX, _NY).
-_GROUPS = 3
 
 
 def group_count(n_batch):
@@ -47,7 +45,7 @@ def group_count(n_batch):
     rounded up to a multiple of the threads (at most one realization a group),
     so that each thread has as many lanes' bodies' terms to apply (lane by lane):
     16 realizations on 2 threads are 4 groups of 4, 20 are 6 of 4 or 3 (lane q of
-    group g holds realization q G + g)."""
+    group g holds the (q G + g)-th realization solved, :meth:`Lanes.solve`)."""
     threads = limits.thread_share() or limits.usable_cpus()
     return int(min(n_batch, -(-(-(-n_batch // LANES)) // threads) * threads))
 
@@ -74,16 +72,32 @@ class Lanes:
         groups = group_count(n_batch)
         sizes = [groups * (nx + 2) * (ny + 1) for nx, ny in levels]
         offsets = np.concatenate([[0], np.cumsum(sizes)])
-        # (offset, nx, ny) of each level as the ndarrays' table, and the group count
-        self.geo = _upload(np.array([[offsets[l], nx, ny, groups] for l, (nx, ny) in
+        # (offset, nx, ny) of each level as the ndarrays' table
+        self.geo = _upload(np.array([[offsets[l], nx, ny] for l, (nx, ny) in
                                      enumerate(levels)]), ti.i32)
         self.pool = pool(real).fit(int(offsets[-1]), int(sizes[0]), groups)
+        self.n_batch, self.groups = n_batch, groups   # groups: of the whole batch
+        self._slots = ti.ndarray(ti.i32, (groups, LANES))
+        self._solved = None      # the realizations that the slots hold
 
-    def solve(self, op, cg, state, flags, geo, chol, consts, maxiter, body):
-        """The whole solve of every realization (:func:`_solve_lanes`)."""
+    def solve(self, op, cg, state, flags, geo, chol, consts, maxiter, body, solved=None):
+        """The whole solve of the realizations ``solved`` (every one if None;
+        :func:`_solve_lanes`): as many groups as they take (:func:`group_count`),
+        lane q of group g holding the (q G + g)-th of them (the other groups
+        empty). A realization's
+        bits do not depend on its lane or on the others in its group."""
+        solved = (np.arange(self.n_batch) if solved is None
+                  else np.flatnonzero(np.asarray(solved, dtype=bool)))
+        if self._solved is None or not np.array_equal(solved, self._solved):
+            G = group_count(len(solved))
+            slots = np.full(tuple(self._slots.shape), -1, dtype=np.int32)
+            k = np.arange(len(solved))
+            slots[k % max(G, 1), k // max(G, 1)] = solved
+            self._slots.from_numpy(slots)
+            self._solved = solved
         p = self.pool
-        _solve_lanes(op, cg, state, flags, geo, chol, self.geo, consts, maxiter, *body,
-                     p.ops.tx, p.ops.ty, p.mg, p.cg, p.chol)
+        _solve_lanes(op, cg, state, flags, geo, chol, self.geo, consts, maxiter, self._slots,
+                     *body, p.ops, p.mg, p.cg, p.chol)
 
 
 class LanePool:
@@ -145,7 +159,7 @@ def pool(real):
 @ti.func
 def _copy_in(op: ti.template(), cg: ti.template(), chol: ti.template(), geo: ti.template(),
              lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
-             lchol: ti.template(), lgeo: ti.template(), R, G, g):
+             lchol: ti.template(), lgeo: ti.template(), slots: ti.template(), g):
     """Group g's operators of every level, Cholesky factors, right-hand side,
     guess and search direction into the lanes, and its multigrid rows cleared
     (the fields are shared: another solver's values may lie where this one has
@@ -159,13 +173,13 @@ def _copy_in(op: ti.template(), cg: ti.template(), chol: ti.template(), geo: ti.
             lmg[_X, c] = zero
             lmg[_B, c] = zero
     for q in range(LANES):
-        r = q * G + g
+        r = slots[g, q]
         for l in range(geo.shape[0]):
             per = (geo[l, _NX] + 2) * (geo[l, _NY] + 1)
             src, dst = geo[l, 0] + r * per, lgeo[l, 0] + g * per
             for c in range(per):
                 tx, ty = ti.cast(0.0, REAL.dtype), ti.cast(0.0, REAL.dtype)
-                if r < R:
+                if r >= 0:
                     tx, ty = op[src + c][_TX], op[src + c][_TY]
                 _put(lops.tx, ti.Vector([dst + c]), q, tx)
                 _put(lops.ty, ti.Vector([dst + c]), q, ty)
@@ -174,23 +188,24 @@ def _copy_in(op: ti.template(), cg: ti.template(), chol: ti.template(), geo: ti.
         for c in range(per):
             for row in ti.static((_SOL, _DIR, _RHS)):
                 v = ti.cast(0.0, REAL.dtype)
-                if r < R:
+                if r >= 0:
                     v = cg[row, src + c]
                 _put(lcg, ti.Vector([row, dst + c]), q, v)
         for a, b in ti.ndrange(m, m):
             v = ti.select(a == b, ti.cast(1.0, REAL.dtype), ti.cast(0.0, REAL.dtype))
-            if r < R:
+            if r >= 0:
                 v = chol[r, a, b]
             _put(lchol, ti.Vector([g, a, b]), q, v)
 
 
 @ti.func
-def _copy_out(cg: ti.template(), geo: ti.template(), lcg: ti.template(), R, G, g):
+def _copy_out(cg: ti.template(), geo: ti.template(), lcg: ti.template(), slots: ti.template(),
+              g):
     """Group g's solutions and search directions back to the ndarray."""
     per = (geo[0, _NX] + 2) * (geo[0, _NY] + 1)
     for q in range(LANES):
-        r = q * G + g
-        if r < R:
+        r = slots[g, q]
+        if r >= 0:
             for c in range(per):
                 for row in ti.static((_SOL, _DIR)):
                     cg[row, r * per + c] = _lane(lcg[row, g * per + c], q)
@@ -208,8 +223,8 @@ def _part(a: ti.template(), ra, b: ti.template(), rb, first, j0, j1):
 
 @ti.func
 def _lane_product(cg: ti.template(), lcg: ti.template(), src, terms: ti.template(),
-                  geo: ti.template(), lgeo: ti.template(), consts: ti.template(), mask, R,
-                  G, g):
+                  geo: ti.template(), lgeo: ti.template(), consts: ti.template(), mask,
+                  slots: ti.template(), g):
     """``lcg[_LPW] = S (H M) S^T lcg[src]`` of the lanes in ``mask``, lane by lane
     (the bodies' cells differ between realizations) on the ndarray's rows of its
     realization, as :func:`._gmg_bodies._product_of` with the same bits: lcg[src]
@@ -222,8 +237,8 @@ def _lane_product(cg: ti.template(), lcg: ti.template(), src, terms: ti.template
     for c in range(g * per, (g + 1) * per):
         lcg[_LPW, c] = zero
     for q in range(LANES):
-        r = q * G + g
-        if _lane(mask, q) != 0 and r < R:
+        r = slots[g, q]
+        if _lane(mask, q) != 0 and r >= 0:
             for o in range(terms.body.shape[1]):
                 b = ring(terms, geo, r, o)
                 for i, j in ti.ndrange((b[0], b[1]), (b[2], b[3])):
@@ -331,7 +346,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
                 lchol: ti.template(), lgeo: ti.template(), cg: ti.template(),
                 geo: ti.template(), state: ti.template(), flags: ti.template(),
                 consts: ti.template(), maxiter, bodies: ti.template(), terms: ti.template(),
-                R, G, g):
+                slots: ti.template(), g):
     """The CG solve of group g's lanes (module docstring): the steps of
     :func:`._gmg_cg._solve_one`, each lane's in its order."""
     tol2 = consts[_K_TOL2]
@@ -340,7 +355,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
     zero = ti.Vector([0.0] * LANES, dt=REAL.dtype)
     active = ti.Vector([0] * LANES)
     for q in ti.static(range(LANES)):
-        active[q] = ti.select(q * G + g < R, 1, 0)
+        active[q] = ti.select(slots[g, q] >= 0, 1, 0)
     iters = ti.Vector([0] * LANES)
     bb = _cells_and_sum(_no_step, lops, lmg, lcg, lgeo, g, active, zero, bodies, lcg, _RHS,
                         lcg, _RHS)
@@ -358,7 +373,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
     while _any(pending):
         # r = b - A x of the pending lanes, and _after_check
         if ti.static(bodies):
-            _lane_product(cg, lcg, _SOL, terms, geo, lgeo, consts, pending, R, G, g)
+            _lane_product(cg, lcg, _SOL, terms, geo, lgeo, consts, pending, slots, g)
         total = _cells_and_sum(_residual, lops, lmg, lcg, lgeo, g, pending, zero, bodies,
                                lmg, _B, lmg, _B)
         rr = _keep(pending, total, rr)
@@ -382,7 +397,7 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
                     lcg[_DIR, k] = _keep(running, lmg[_X, k] + beta * lcg[_DIR, k],
                                          lcg[_DIR, k])
             if ti.static(bodies):
-                _lane_product(cg, lcg, _DIR, terms, geo, lgeo, consts, running, R, G, g)
+                _lane_product(cg, lcg, _DIR, terms, geo, lgeo, consts, running, slots, g)
             curvature = _cells_and_sum(_matvec, lops, lmg, lcg, lgeo, g, running, zero, bodies,
                                        lcg, _DIR, lcg, _ADIR)
             alpha = _keep(running, ti.select(curvature > 0, rz / curvature, zero), alpha)
@@ -395,8 +410,8 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
             pending = _keep(running, 1 - go, pending)
             running = _keep(running, go, running)
     for q in ti.static(range(LANES)):
-        r = q * G + g
-        if r < R:
+        r = slots[g, q]
+        if r >= 0:
             state[r, _RZ] = rz[q]
             state[r, _BB] = bb[q]
             state[r, _RR] = rr[q]
@@ -412,17 +427,17 @@ def _lane_solve(lops: ti.template(), lmg: ti.template(), lcg: ti.template(),
 
 @ti.kernel
 def _solve_lanes(op: _Ops, cg: _Rows, state: _Rows, flags: _Ints, geo: _Ints, chol: _Chol,
-                 lgeo: _Ints, consts: _Consts, maxiter: ti.i32,
-                 bodies: ti.template(), terms: Terms, ltx: ti.template(), lty: ti.template(),
-                 lmg: ti.template(), lcg: ti.template(), lchol: ti.template()):
-    """The whole solve of every realization, a group of LANES per thread: copied
-    into the lanes, solved, copied back (module docstring)."""
-    R, G = flags.shape[0], lgeo[0, _GROUPS]
-    lops = ti.static(LaneOps(ltx, lty))
-    for t in range(G * _TASK):  # one group per thread (_TASK)
-        if t % _TASK == 0:
+                 lgeo: _Ints, consts: _Consts, maxiter: ti.i32, slots: _Ints,
+                 bodies: ti.template(), terms: Terms, lops: ti.template(), lmg: ti.template(),
+                 lcg: ti.template(), lchol: ti.template()):
+    """The whole solve of the realizations in ``slots`` (``slots[g, q]``: lane q of
+    group g, -1 for none; a group without lane 0 is empty), a group of LANES per
+    thread: copied into the lanes, solved, copied back (module docstring).
+    ``lops``: the pool's LaneOps."""
+    for t in range(slots.shape[0] * _TASK):  # one group per thread (_TASK)
+        if t % _TASK == 0 and slots[t // _TASK, 0] >= 0:
             g = t // _TASK
-            _copy_in(op, cg, chol, geo, lops, lmg, lcg, lchol, lgeo, R, G, g)
+            _copy_in(op, cg, chol, geo, lops, lmg, lcg, lchol, lgeo, slots, g)
             _lane_solve(lops, lmg, lcg, lchol, lgeo, cg, geo, state, flags, consts, maxiter,
-                        bodies, terms, R, G, g)
-            _copy_out(cg, geo, lcg, R, G, g)
+                        bodies, terms, slots, g)
+            _copy_out(cg, geo, lcg, slots, g)

@@ -41,7 +41,9 @@ residual ``|b - A p| / |b|`` meets ``tol``; a converged realization is frozen
 (every kernel skips it) while the others go on. The recursively updated
 residual decides the stop; the true residual is then recomputed, and CG restarted
 from there if rounding had made them differ by more than ``tol`` (in float32 it
-also stops once that residual is round-off: _gmg_cg._after_check).
+also stops once that residual is round-off: _gmg_cg._after_check). A realization
+left out of a solve (``solve(..., only=...)``, flag ``_SKIP``) is frozen from
+the start.
 
 *Moving bodies* (``solve(..., bodies=BodyTerms(...))``, the implicit carried
 volume): the operator gains ``S (H M) S^T``, one symmetric positive
@@ -100,7 +102,6 @@ Examples
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 import time
-from typing import NamedTuple
 
 import numpy as np
 from scipy import ndimage
@@ -109,10 +110,10 @@ from .. import backend
 from ..backend import ti
 from .solver import FluxImbalanceError, SolveInfo
 from .system import FiniteVolumeSystem
-from ._gmg_bodies import BODY_COLUMNS, Terms, _body_rhs
+from ._gmg_bodies import BODY_COLUMNS, BodyTerms, Terms, _body_rhs
 from ._gmg_cg import (REPORT_COLUMNS, _REPORT_ACTIVE, _REPORT_FLAGS, _REPORT_FLUXES,
                       _boundary_fluxes, _cg_direction, _cg_step, _check_stopped, _copy_row,
-                      _pressure, _report, _residual_check, _solve_each)
+                      _mark, _pressure, _report, _residual_check, _solve_each)
 from ._gmg_cycle import (CG_ROWS, COARSEST_CELLS, MAXITER, N_CONSTS, N_FLAGS, REAL,
                          REALIZATION_CELLS, SERIAL_CELLS, SWEEPS, _BAD, _BB, _CHANGED, _ITERS,
                          _K_DX, _K_DY, _K_GX, _K_GY, _K_INFLOW, _K_PREF, _K_TOL2, _KEEP,
@@ -134,32 +135,6 @@ F32_TOL_FLOOR = 1e-6
 F32_FLUX_FLOOR = 5e-3
 
 # ---------------------------------------------------------------- the solver
-class BodyTerms(NamedTuple):
-    """The moving bodies of the implicit carried-volume coupling, for
-    :meth:`TaichiPressureSolver.solve` (the equations: :mod:`._gmg_bodies`;
-    docs/scene.md, "Carried volume"): Taichi ndarrays, ``R`` realizations of
-    ``N`` bodies.
-
-    Attributes
-    ----------
-    owner : int32 (R, nx, ny)
-        The body whose outline holds each cell's centre, -1 for none.
-    centre : (R, N, 2), the solve's float type (float64 where the backend has it)
-        Each body's centre in cell units: cell ``(i, j)``'s centre is at ``(i, j)``.
-    mobility : (R, N, 3)
-        ``H M``: over the next fluid interval the body moves at ``drift -
-        mobility S^T (p - p_0)`` (``v_x, v_y, omega``; 0 for a body out of play),
-        ``p_0`` the initial guess.
-    drift : (R, N, 3)
-        That velocity at ``p = p_0``.
-    """
-
-    owner: object
-    centre: object
-    mobility: object
-    drift: object
-
-
 class TaichiPressureSolver:
     """Pressure solve for ``n_batch`` permeability fields on one grid, in Taichi.
 
@@ -369,9 +344,11 @@ class TaichiPressureSolver:
         self._bodies = None                        # those of the solve under way
         self._terms = None   # their pack (Terms), kept while the same arrays come
         self._lanes = Lanes(levels, R, real) if lanes else None
+        self._solved = None   # the realizations solved (``only``), None for all
 
     # ------------------------------------------------------------------ public
-    def solve(self, kappa, x0=None, carried=None, occupied=None, *, host=True, bodies=None):
+    def solve(self, kappa, x0=None, carried=None, occupied=None, *, host=True, bodies=None,
+              only=None):
         """Pressure for each realization's permeability field.
 
         As :meth:`taichi_hsdem.fluid.PressureSolver.solve`, which see; in
@@ -380,7 +357,11 @@ class TaichiPressureSolver:
         ``(R, nx, ny)`` of its float type (overwritten by the next solve). With
         ``bodies`` (:class:`BodyTerms`, not with ``carried``) the moving bodies
         carry their volume implicitly: the pressure and their velocities over
-        the next interval are solved together (:mod:`._gmg_bodies`).
+        the next interval are solved together (:mod:`._gmg_bodies`). With
+        ``only`` (bool, (R,)) the realizations outside it are not solved: no
+        kernel touches them, and their pressure, fluxes and residual stay
+        those of their last solve (0 iterations), as a solve of a system that
+        has not changed since that one converged would leave them.
 
         Returns
         -------
@@ -412,6 +393,7 @@ class TaichiPressureSolver:
             raise ValueError("give carried (the lagged carried flux) or bodies (the "
                              "implicit one), not both")
         k_dev, single = self._device_grid(kappa, "kappa", self._kappa_in)
+        self._mark(only)
         _scan(k_dev, self._seen, self._connected_dev, self._flags)
         if self.parallel == "cells" and not self._had_zeros.any():
             # On a GPU (the cells way), with no realization cut off: solve before
@@ -437,6 +419,19 @@ class TaichiPressureSolver:
             self._build(k_dev, changed, scan[:, _ZEROS] > 0)
         report = self._solve_system(x0, carried, occupied, bodies, k_dev)
         return self._finish(report, changed, single, host, t_start)
+
+    def _mark(self, only):
+        """Flag the realizations outside ``only`` (solve) to be skipped."""
+        solved = None if only is None else np.asarray(only, dtype=bool)
+        if solved is not None and solved.shape != (self.n_batch,):
+            raise ValueError(f"only must have shape ({self.n_batch},), got {solved.shape}")
+        if solved is not None and solved.all():
+            solved = None
+        if solved is None and self._solved is None:
+            return                          # nothing skipped now or at the last solve
+        mask = np.ones(self.n_batch) if solved is None else solved
+        _mark(self._flags, _upload(mask, ti.i32))
+        self._solved = solved
 
     def _build(self, k_dev, changed, zeros):
         """The cut-off cells of the realizations whose zeros may have moved (given
@@ -604,7 +599,7 @@ class TaichiPressureSolver:
         body = self._body_args()
         if self._lanes is not None:
             self._lanes.solve(self._op, self._cg, self._state, self._flags, self._geo,
-                              self._chol, self._consts, maxiter, body)
+                              self._chol, self._consts, maxiter, body, self._solved)
             return self._read_report(k_dev)
         if self.parallel == "realizations":
             _solve_each(*arrays, self._chol, self._consts, maxiter, *body)
