@@ -70,7 +70,7 @@ _OFF, _NX, _NY = 0, 1, 2
 # (b = 0), the permeability scan's counts of changed, zero and invalid cells, and
 # the CG's own: stopped at the last step, its true residual to be checked; and the
 # next search direction starts afresh (beta = 0); and left out of this solve
-# (gmg.TaichiPressureSolver.solve's ``only``: every kernel skips it).
+# (gmg.TaichiPressureSolver.solve's ``only``: every CG kernel skips it).
 _RUNNING, _ITERS, _UNDRIVEN, _CHANGED, _ZEROS, _BAD, _CHECK, _FIRST, _SKIP = range(9)
 N_FLAGS = 9
 # Per-realization floats: r.z, |b|^2, |r|^2, CG step and direction coefficients,

@@ -38,6 +38,9 @@ from ._gmg_setup import _upload
 #: the solve does not read, is left out).
 _LPW = 4
 _CG_ROWS = 5
+#: Column of the lanes' level table holding the solve's group count (after _OFF,
+#: _NX, _NY): the groups the kernel's threads take, the first G of ``slots``.
+_GROUPS = 3
 
 
 def group_count(n_batch):
@@ -72,9 +75,11 @@ class Lanes:
         groups = group_count(n_batch)
         sizes = [groups * (nx + 2) * (ny + 1) for nx, ny in levels]
         offsets = np.concatenate([[0], np.cumsum(sizes)])
-        # (offset, nx, ny) of each level as the ndarrays' table
-        self.geo = _upload(np.array([[offsets[l], nx, ny] for l, (nx, ny) in
-                                     enumerate(levels)]), ti.i32)
+        # (offset, nx, ny) of each level as the ndarrays' table, and the groups
+        # of the solve (column _GROUPS, set by solve)
+        self._table = np.array([[offsets[l], nx, ny, groups] for l, (nx, ny) in
+                                enumerate(levels)], dtype=np.int32)
+        self.geo = _upload(self._table, ti.i32)
         self.pool = pool(real).fit(int(offsets[-1]), int(sizes[0]), groups)
         self.n_batch, self.groups = n_batch, groups   # groups: of the whole batch
         self._slots = ti.ndarray(ti.i32, (groups, LANES))
@@ -83,8 +88,7 @@ class Lanes:
     def solve(self, op, cg, state, flags, geo, chol, consts, maxiter, body, solved=None):
         """The whole solve of the realizations ``solved`` (every one if None;
         :func:`_solve_lanes`): as many groups as they take (:func:`group_count`),
-        lane q of group g holding the (q G + g)-th of them (the other groups
-        empty). A realization's
+        lane q of group g holding the (q G + g)-th of them. A realization's
         bits do not depend on its lane or on the others in its group."""
         solved = (np.arange(self.n_batch) if solved is None
                   else np.flatnonzero(np.asarray(solved, dtype=bool)))
@@ -94,6 +98,8 @@ class Lanes:
             k = np.arange(len(solved))
             slots[k % max(G, 1), k // max(G, 1)] = solved
             self._slots.from_numpy(slots)
+            self._table[:, _GROUPS] = G
+            self.geo.from_numpy(self._table)
             self._solved = solved
         p = self.pool
         _solve_lanes(op, cg, state, flags, geo, chol, self.geo, consts, maxiter, self._slots,
@@ -430,12 +436,12 @@ def _solve_lanes(op: _Ops, cg: _Rows, state: _Rows, flags: _Ints, geo: _Ints, ch
                  lgeo: _Ints, consts: _Consts, maxiter: ti.i32, slots: _Ints,
                  bodies: ti.template(), terms: Terms, lops: ti.template(), lmg: ti.template(),
                  lcg: ti.template(), lchol: ti.template()):
-    """The whole solve of the realizations in ``slots`` (``slots[g, q]``: lane q of
-    group g, -1 for none; a group without lane 0 is empty), a group of LANES per
-    thread: copied into the lanes, solved, copied back (module docstring).
-    ``lops``: the pool's LaneOps."""
-    for t in range(slots.shape[0] * _TASK):  # one group per thread (_TASK)
-        if t % _TASK == 0 and slots[t // _TASK, 0] >= 0:
+    """The whole solve of the realizations in the first ``lgeo[0, _GROUPS]``
+    groups of ``slots`` (``slots[g, q]``: lane q of group g, -1 for none), a group
+    of LANES per thread: copied into the lanes, solved, copied back (module
+    docstring). ``lops``: the pool's LaneOps."""
+    for t in range(lgeo[0, _GROUPS] * _TASK):  # one group per thread (_TASK)
+        if t % _TASK == 0:
             g = t // _TASK
             _copy_in(op, cg, chol, geo, lops, lmg, lcg, lchol, lgeo, slots, g)
             _lane_solve(lops, lmg, lcg, lchol, lgeo, cg, geo, state, flags, consts, maxiter,

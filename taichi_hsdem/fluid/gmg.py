@@ -345,6 +345,7 @@ class TaichiPressureSolver:
         self._terms = None   # their pack (Terms), kept while the same arrays come
         self._lanes = Lanes(levels, R, real) if lanes else None
         self._solved = None   # the realizations solved (``only``), None for all
+        self._only = None     # ``only`` on the device, made on first use
 
     # ------------------------------------------------------------------ public
     def solve(self, kappa, x0=None, carried=None, occupied=None, *, host=True, bodies=None,
@@ -358,10 +359,11 @@ class TaichiPressureSolver:
         ``bodies`` (:class:`BodyTerms`, not with ``carried``) the moving bodies
         carry their volume implicitly: the pressure and their velocities over
         the next interval are solved together (:mod:`._gmg_bodies`). With
-        ``only`` (bool, (R,)) the realizations outside it are not solved: no
-        kernel touches them, and their pressure, fluxes and residual stay
-        those of their last solve (0 iterations), as a solve of a system that
-        has not changed since that one converged would leave them.
+        ``only`` (bool, (R,)) the realizations outside it are not iterated: CG
+        leaves their solution as the last solve left it (0 iterations), as a
+        solve of a system that has not changed since that one converged would.
+        Leave out only such realizations: the flux check and the pressure are
+        still computed from each one's solution and present kappa.
 
         Returns
         -------
@@ -429,8 +431,11 @@ class TaichiPressureSolver:
             solved = None
         if solved is None and self._solved is None:
             return                          # nothing skipped now or at the last solve
-        mask = np.ones(self.n_batch) if solved is None else solved
-        _mark(self._flags, _upload(mask, ti.i32))
+        if self._only is None:
+            self._only = ti.ndarray(ti.i32, (self.n_batch,))
+        self._only.from_numpy(np.ones(self.n_batch, np.int32) if solved is None
+                              else solved.astype(np.int32))
+        _mark(self._flags, self._only)
         self._solved = solved
 
     def _build(self, k_dev, changed, zeros):
