@@ -7,12 +7,15 @@ does) and, under ``python -m``, ends the process by SIGINT at exit whatever stat
 the program chose. This module imports nothing heavy: the entry point installs its
 handler before the package loads Taichi.
 
-A signal that arrives while Python runs a destructor (Taichi's ``ArgPack.__del__``
-after a kernel launch, say) raises its stop there, where Python only reports the
-exception ("Exception ignored in ...", with a traceback) and goes on: the stop
-would be lost. :func:`keep_swallowed_stops` installs a hook that keeps such a stop
-quietly instead, and :func:`raise_if_swallowed` (asked between chunks of a run and
-between a study's points) raises it again where it can stop the program."""
+A stop can be lost on its way: raised while Python runs a destructor (Taichi's
+``ArgPack.__del__`` after a kernel launch, say), Python only reports it ("Exception
+ignored in ...", with a traceback) and goes on; raised while Taichi's decorators
+inspect their caller, their bare ``except:`` swallows it (a sweep signalled during a
+point's set-up ran that point to its end). So :func:`raise_stop` notes each stop in
+:data:`pending` before raising it, :func:`keep_swallowed_stops` installs a hook that
+keeps a destructor's stop quietly instead of printing it, and
+:func:`raise_if_swallowed` (asked between chunks of a run and between a study's
+points) raises a noted stop again where it can stop the program."""
 import signal
 import sys
 
@@ -25,13 +28,17 @@ class Stopped(KeyboardInterrupt):
         self.signum = signum
 
 
+#: Signals whose stop was raised and may not have reached the program (a library or
+#: a destructor swallowed it), not yet raised again by :func:`raise_if_swallowed`.
+pending: list = []
+
+
 def raise_stop(signum, frame):
-    """A signal handler: stop where the program is, by :class:`Stopped`."""
+    """A signal handler: stop where the program is, by :class:`Stopped`, noted in
+    :data:`pending` first in case what runs there swallows it."""
+    if not pending:
+        pending.append(signum)
     raise Stopped(signum)
-
-
-#: Signals whose stop a destructor swallowed, not yet raised again.
-swallowed: list = []
 
 
 def keep_swallowed_stops() -> None:
@@ -41,17 +48,19 @@ def keep_swallowed_stops() -> None:
 
     def hook(unraisable):
         if isinstance(unraisable.exc_value, Stopped):
-            swallowed.append(unraisable.exc_value.signum)
+            if not pending:
+                pending.append(unraisable.exc_value.signum)
             return
         previous(unraisable)
     sys.unraisablehook = hook
 
 
 def raise_if_swallowed() -> None:
-    """Raise again the first stop that a destructor swallowed, if any."""
-    if swallowed:
-        signum = swallowed[0]
-        swallowed.clear()
+    """Raise again the first noted stop, if any (it may have reached the program
+    already: then the program is stopping, and raising it again changes nothing)."""
+    if pending:
+        signum = pending[0]
+        pending.clear()
         raise Stopped(signum)
 
 
