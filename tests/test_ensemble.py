@@ -155,8 +155,11 @@ def test_batch_equals_alone_through_escapes_refeeds_and_clogs(name, lanes, monke
                                           err_msg=key)
 
 
-@pytest.mark.parametrize("lanes", ["auto", True])
-def test_a_stopped_realization_is_left_out_of_the_solves_and_nothing_changes(lanes,
+@pytest.mark.parametrize("lanes, sets", [
+    ("auto", []), (True, []), ("auto", PRESSURE + ["run.t_end=0.7"]),
+    ("auto", ["fluid.flux_coupling=lagged"])], ids=["flow_rate", "flow_rate-lanes",
+                                                    "pressure", "lagged"])
+def test_a_stopped_realization_is_left_out_of_the_solves_and_nothing_changes(lanes, sets,
                                                                             monkeypatch):
     """Once a realization has stopped (here it clogs, run.stop_at_clog) and been
     solved once since, the pressure solves leave it out (dem/coupling.py:
@@ -164,14 +167,15 @@ def test_a_stopped_realization_is_left_out_of_the_solves_and_nothing_changes(lan
     iteration). The run's results, series, flow rows, final state and final
     pressure are those of the same batch solved whole at every solve, with one
     realization per thread and in one group's lanes (which then hold the
-    running realization alone)."""
+    running realization alone); with the pressure inlet too. With the lagged
+    carried flux a stopped realization's system still changes: it is solved."""
     from taichi_hsdem.dem.coupling import FluidCoupling
 
     def run(skip):
         monkeypatch.setattr(FluidCoupling, "skip_stopped", skip)
         sim = in_one_group(lambda: Simulation(load_scene(
             VANI, ["feed.inlet=[0.0, 0.0005]", "fluid.workers=1", *DISKS, "run.t_end=0.6",
-                   "run.seed=0", "run.realizations=2"])), lanes, monkeypatch)
+                   "run.seed=0", "run.realizations=2", *sets])), lanes, monkeypatch)
         solver, asked = sim.fluid.solver, []
         solve = solver.solve
 
@@ -185,7 +189,13 @@ def test_a_stopped_realization_is_left_out_of_the_solves_and_nothing_changes(lan
     whole_sim, whole, asked_whole = run(False)
     rows = res.summary["realizations"]
     assert [row["clogged"] for row in rows].count(True) == 1, rows   # one stops early
-    assert sum(only is not None and not only.all() for only in asked) >= 3
+    left_out = sum(only is not None and not only.all() for only in asked)
+    if "fluid.flux_coupling=lagged" in sets:
+        # the lagged flux's source velocities still change after the stop (left
+        # out, the stopped realization's final pressure was 1.7 % off)
+        assert left_out == 0
+    else:
+        assert left_out >= 3
     assert all(only is None for only in asked_whole)
     assert rows == whole.summary["realizations"]
     assert res.series == whole.series

@@ -490,7 +490,7 @@ class FluidCoupling:
             terms = (self._body_terms(bodies, batch, particles, templates, materials)
                      if implicit else None)
             only = None
-            if self.skip_stopped:
+            if self.skip_stopped and not flux:
                 running = batch.running.to_numpy() != 0
                 only = running | ~self._settled
                 self._settled = ~running
@@ -514,7 +514,9 @@ class FluidCoupling:
     #: solved since it stopped: nothing of it moves any more (the DEM skips it,
     #: its bodies are out of play), so its solve would take no iteration and
     #: leave its pressure as it is. False solves every realization every time
-    #: (the same bits).
+    #: (the same bits). Not with the lagged carried flux (fluid.flux_coupling =
+    #: "lagged"): its source velocities, averaged with each update's, still change
+    #: after the stop, and with them the system.
     skip_stopped = True
 
     @property
