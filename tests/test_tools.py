@@ -425,7 +425,8 @@ def test_bench_order_times_both_numberings_of_the_same_disks():
 def test_bench_stopped_pairs_the_two_ways_solve_by_solve():
     """tools/bench_stopped.py: the batch run with the stopped realizations left out
     of the solves and solved whole, in turn in one process; the two end in the
-    same positions (the tool checks it) and every solve is timed both ways."""
+    same positions (the tool checks it) and every solve, and its whole fluid
+    update, is timed both ways."""
     tool = ROOT / "tools" / "bench_stopped.py"
     proc = subprocess.run([sys.executable, str(tool), "--realizations", "2", "--t-end",
                            "0.03", "--repeats", "1"], capture_output=True, text=True,
@@ -433,7 +434,10 @@ def test_bench_stopped_pairs_the_two_ways_solve_by_solve():
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
     assert lines[0].startswith("2 realizations,") and "(the same bits)" in lines[0]
-    band = next(line for line in lines if line.lstrip().startswith("2-  2"))
-    solves, left, whole, ratio = (float(v) for v in band.split()[2:])
+    bands = [line for line in lines if line.lstrip().startswith("2-  2")]
+    assert len(bands) == 2             # the solves, then their fluid updates
+    (solves, left, whole, ratio), (updates, *times) = (
+        [float(v) for v in band.split()[2:]] for band in bands)
     assert solves >= 2 and left > 0 and whole > 0 and ratio > 0
+    assert updates == solves and times[0] >= left and times[1] >= whole
     assert lines[-1].startswith("whole runs (s), left out / whole:")

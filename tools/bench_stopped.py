@@ -1,13 +1,15 @@
 """What the pressure solves cost as the realizations of a batch stop, with the
 stopped ones left out of the solves (``FluidCoupling.skip_stopped``, the
-default) and with every realization solved at every solve, in one process.
+default: neither solved nor set up, their permeability not redrawn) and with
+every realization solved at every solve, in one process.
 
 A batch of the vani scene runs until every realization has clogged (or
 ``--t-end``), once each way and ``--repeats`` times in turn (left out, whole,
 left out, ...); the two ways give the same bits, so their solves pair one to
 one. Per band of running realizations it prints the solves' median wall time
-each way and the median of their ratios, pair by pair, then the whole runs'
-times. Timing only (no test asserts a speed)::
+each way and the median of their ratios, pair by pair, the same for the whole
+fluid updates (the permeability drawn, the solve, the forces), then the whole
+runs' times. Timing only (no test asserts a speed)::
 
     python tools/bench_stopped.py --realizations 32 --repeats 2
 """
@@ -22,26 +24,34 @@ BANDS = ((0.75, 1.0), (0.5, 0.75), (0.25, 0.5), (0.125, 0.25), (0.0, 0.125))
 
 
 def run(realizations, t_end, skip):
-    """(per solve: running count, seconds), the run's wall seconds."""
+    """(per solve: running count, seconds of the solve, of its fluid update), the
+    run's wall seconds, the final positions."""
     from taichi_hsdem import Simulation, load_scene
     from taichi_hsdem.dem.coupling import FluidCoupling
     FluidCoupling.skip_stopped = skip
     sim = Simulation(load_scene(ROOT / "scenes" / "vani_phi026.toml",
                                 [f"run.realizations={realizations}", f"run.t_end={t_end}"]))
     solver, log = sim.fluid.solver, []
-    solve = solver.solve
+    solve, update = solver.solve, sim.fluid.update
 
     def timed(*args, **kwargs):
-        n = int(sim.batch.running.to_numpy().sum())
         t0 = time.perf_counter()
         out = solve(*args, **kwargs)
-        log.append((n, time.perf_counter() - t0))
+        log[-1][1] = time.perf_counter() - t0
         return out
-    solver.solve = timed
+
+    def timed_update(*args, **kwargs):
+        log.append([int(sim.batch.running.to_numpy().sum()), np.nan, np.nan])
+        t0 = time.perf_counter()
+        out = update(*args, **kwargs)
+        log[-1][2] = time.perf_counter() - t0
+        return out
+    solver.solve, sim.fluid.update = timed, timed_update
     t0 = time.perf_counter()
     result = sim.run()
     wall = time.perf_counter() - t0
-    return np.array(log), wall, result.final["x"]
+    log = np.array(log)
+    return log[~np.isnan(log[:, 1])], wall, result.final["x"]
 
 
 def main(argv=None):
@@ -64,19 +74,22 @@ def main(argv=None):
     counts = left[0, :, 0]
     print(f"{a.realizations} realizations, {len(counts)} solves a run, {a.repeats} runs each way "
           "(the same bits)")
-    print("running        solves   left out (ms)   whole (ms)   ratio, median of pairs")
-    for lo, hi in BANDS:
-        m = (counts > lo * a.realizations) & (counts <= hi * a.realizations)
-        if not m.any():
-            continue
-        t_left, t_whole = left[:, m, 1], whole[:, m, 1]
-        print(f"{int(lo * a.realizations) + 1:3d}-{int(hi * a.realizations):3d}   {m.sum():10d}"
-              f"   {1e3 * np.median(t_left):13.1f}   {1e3 * np.median(t_whole):10.1f}"
-              f"   {np.median(t_left / t_whole):.2f}")
+    for column, what in ((1, "solves"), (2, "fluid updates")):
+        print(f"{what}: running   count   left out (ms)   whole (ms)   ratio, median of pairs")
+        for lo, hi in BANDS:
+            m = (counts > lo * a.realizations) & (counts <= hi * a.realizations)
+            if not m.any():
+                continue
+            t_left, t_whole = left[:, m, column], whole[:, m, column]
+            print(f"{int(lo * a.realizations) + 1:3d}-{int(hi * a.realizations):3d}   "
+                  f"{m.sum():10d}   {1e3 * np.median(t_left):13.1f}   "
+                  f"{1e3 * np.median(t_whole):10.1f}   {np.median(t_left / t_whole):.2f}")
     walls = [(r[1], w[1]) for r, w in zip(runs[True], runs[False])]
     print("whole runs (s), left out / whole: " + ", ".join(f"{x:.1f} / {y:.1f}" for x, y in walls)
           + f"; solves {left[:, :, 1].sum(axis=1).round(1).tolist()} / "
-          f"{whole[:, :, 1].sum(axis=1).round(1).tolist()}")
+          f"{whole[:, :, 1].sum(axis=1).round(1).tolist()}; their fluid updates "
+          f"{left[:, :, 2].sum(axis=1).round(1).tolist()} / "
+          f"{whole[:, :, 2].sum(axis=1).round(1).tolist()}")
 
 
 if __name__ == "__main__":

@@ -54,10 +54,12 @@ _LEVEL_SETS = state.Templates.part("is_circle", "radius", "ls_phi", "ls_grad", "
 _NODES = state.Templates.part("node_pos", "node_area", "node_meta")
 # FluidCoupling's arrays: the permeability (``cell_kappa``: Materials has a
 # ``kappa``), carried flux and owners rasterize_permeability writes, from the
-# free permeability ``base`` and the source velocities ``vs``, ``ws``; and the
-# bodies' state at the last solve with their terms of the next (body_drift).
+# free permeability ``base`` and the source velocities ``vs``, ``ws``, but not for
+# a realization ``frozen`` (1: left out of the solve, see FluidCoupling.update);
+# and the bodies' state at the last solve with their terms of the next
+# (body_drift).
 _CELLS = state.pack_type("FluidCoupling", ("base", "cell_kappa", "carried", "owner", "vs",
-                                           "ws"))
+                                           "ws", "frozen"))
 # (in the pressure solve's float type, REAL; ``drift_consts``: the fluid interval,
 # the gap and the grid's origin and cell size, as arrays of that type carry them)
 _DRIFT = state.pack_type("FluidCoupling", ("past", "centre", "mobility", "drift",
@@ -83,7 +85,8 @@ def rasterize_permeability(bodies: _POSE, sp: ti.types.ndarray(), rb: ti.types.n
                            ox: float, oy: float, h: float, span: ti.i32):
     """Permeability of every fluid cell, ``chi v``: the velocity of the particle
     a cell's centre lies in (``vs + ws x r``), zero outside particles, and
-    ``owner``: that particle (the highest-numbered where two overlap), -1.
+    ``owner``: that particle (the highest-numbered where two overlap), -1; a
+    realization ``frozen`` keeps what it has.
 
     A thread per cell of each body's box of cells (``span`` cells a side at
     most), not a loop over the box in a thread per body: a GPU gets the threads,
@@ -92,11 +95,12 @@ def rasterize_permeability(bodies: _POSE, sp: ti.types.ndarray(), rb: ti.types.n
     nx = cells.base.shape[0]
     ny = cells.base.shape[1]
     for r, cx, cy in cells.cell_kappa:
-        cells.cell_kappa[r, cx, cy] = cells.base[cx, cy]
-        cells.carried[r, cx, cy] = vec2(0.0, 0.0)
-        cells.owner[r, cx, cy] = -1
+        if cells.frozen[r] == 0:
+            cells.cell_kappa[r, cx, cy] = cells.base[cx, cy]
+            cells.carried[r, cx, cy] = vec2(0.0, 0.0)
+            cells.owner[r, cx, cy] = -1
     for r, i, t in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1], span * span):
-        if bodies.alive[r, i] == 0:
+        if bodies.alive[r, i] == 0 or cells.frozen[r] != 0:
             continue
         xi = bodies.x[r, i]
         i0 = ti.max(ti.cast(ti.floor((xi.x - rb[i] - ox) / h - 0.5), ti.i32), 0)
@@ -311,8 +315,9 @@ class FluidCoupling:
         self.w_src = np.zeros((n_real, n_part))
         self.vs = state._zeros((n_real, n_part), vector=True)
         self.ws = state._zeros((n_real, n_part))
+        self.frozen = state._zeros(n_real, ti.i32)
         self._cells = _CELLS(base=self.base, cell_kappa=self.kappa, carried=self.carried,
-                             owner=self.owner, vs=self.vs, ws=self.ws)
+                             owner=self.owner, vs=self.vs, ws=self.ws, frozen=self.frozen)
         # the realizations apply_forces sets: all of them, or those it is given
         self._every = state.array(np.ones(n_real, dtype=np.int32), ti.i32)
         self._chosen = state._zeros(n_real, ti.i32)
@@ -341,6 +346,7 @@ class FluidCoupling:
         self.last_info = None                      # its SolveInfo
         self._kappa_solved = None
         self._settled = np.zeros(n_real, dtype=bool)  # stopped, and solved since
+        self._frozen_host = np.zeros(n_real, dtype=bool)  # frozen's values
         self.updates = 0
         self.solves = 0
         self.seconds = 0.0
@@ -462,6 +468,13 @@ class FluidCoupling:
         flux = m.scene.fluid.particle_flux and not implicit   # the lagged carried flux
         if flux:
             self._source_velocities(bodies)
+        only = None
+        if self.on_device and self.skip_stopped and not flux:
+            running = batch.running.to_numpy() != 0
+            only = running | ~self._settled
+            if (self._frozen_host != ~only).any():
+                self._frozen_host = ~only
+                self.frozen.from_numpy(self._frozen_host.astype(np.int32))
         b, t = bodies, templates
         rasterize_permeability(b.pack_of(_POSE), particles.species, particles.bounding_radius,
                                materials.kappa, t.pack_of(_LEVEL_SETS), self._cells,
@@ -489,10 +502,7 @@ class FluidCoupling:
         if self.on_device:
             terms = (self._body_terms(bodies, batch, particles, templates, materials)
                      if implicit else None)
-            only = None
-            if self.skip_stopped and not flux:
-                running = batch.running.to_numpy() != 0
-                only = running | ~self._settled
+            if only is not None:
                 self._settled = ~running
             pres, info = self.solver.solve(self.kappa if kappa is None else kappa,
                                            carried=carried, occupied=occupied, host=False,

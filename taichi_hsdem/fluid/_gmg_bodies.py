@@ -36,8 +36,8 @@ Package-internal: :mod:`.gmg` is the API."""
 from typing import NamedTuple
 
 from ..backend import ti
-from ._gmg_cycle import (REAL, _BASE, _K_DX, _K_DY, _NX, _NY, _RHS, _SOL, _Cells, _Consts,
-                         _Field, _Ints, _Rows, _index)
+from ._gmg_cycle import (REAL, _BASE, _K_DX, _K_DY, _NX, _NY, _RHS, _SKIP, _SOL, _Cells,
+                         _Consts, _Field, _Ints, _Rows, _index)
 
 
 class BodyTerms(NamedTuple):
@@ -274,39 +274,46 @@ def _product(cg: ti.template(), src, dst, flags: ti.template(), running, terms: 
 
 @ti.kernel
 def _body_rhs(cg: _Rows, terms: Terms, centre: _Field, mobility: _Field, drift: _Field,
-              geo: _Ints, consts: _Consts):
+              geo: _Ints, consts: _Consts, flags: _Ints):
     """``terms.body``'s centre and ``H M`` columns from ``centre`` and ``mobility``;
     each body's box of cells (the smallest holding the cells it owns; empty if
     none); then ``RHS = BASE + S (q + (H M) S^T SOL)``, SOL being the initial
-    guess."""
-    _load_terms(terms.owner, terms.body, terms.box, centre, mobility, geo)
+    guess. Not for a realization left out of the solve (flag _SKIP): no kernel of
+    the solve reads its terms or right-hand side."""
+    _load_terms(terms.owner, terms.body, terms.box, centre, mobility, geo, flags)
     R, N = terms.body.shape[0], terms.body.shape[1]
     for r, o in ti.ndrange(R, N):
-        _gather_body(cg, _SOL, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
-        for m in ti.static(range(3)):
-            terms.body[r, o, _Z + m] = (drift[r, o, m]
-                                        + terms.body[r, o, _MOB + m] * terms.body[r, o, _Y + m])
+        if flags[r, _SKIP] == 0:
+            _gather_body(cg, _SOL, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
+            for m in ti.static(range(3)):
+                terms.body[r, o, _Z + m] = (drift[r, o, m] + terms.body[r, o, _MOB + m]
+                                            * terms.body[r, o, _Y + m])
     nx, ny = geo[0, _NX], geo[0, _NY]
     for r, i, j in ti.ndrange(R, nx, ny):
-        cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(cg, _BASE, terms, geo, consts[_K_DX],
-                                                         consts[_K_DY], r, i, j)
+        if flags[r, _SKIP] == 0:
+            cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(
+                cg, _BASE, terms, geo, consts[_K_DX], consts[_K_DY], r, i, j)
 
 
 @ti.func
 def _load_terms(owner: ti.template(), body: ti.template(), box: ti.template(),
-                centre: ti.template(), mobility: ti.template(), geo: ti.template()):
+                centre: ti.template(), mobility: ti.template(), geo: ti.template(),
+                flags: ti.template()):
     """The first passes of :func:`_body_rhs`: the centre and ``H M`` columns of
     ``body``, then each body's box of cells."""
     R, N = body.shape[0], body.shape[1]
     nx, ny = geo[0, _NX], geo[0, _NY]
     for r, o in ti.ndrange(R, N):
-        body[r, o, _CX] = centre[r, o, 0]
-        body[r, o, _CY] = centre[r, o, 1]
-        for m in ti.static(range(3)):
-            body[r, o, _MOB + m] = mobility[r, o, m]
-        box[r, o, 0], box[r, o, 1], box[r, o, 2], box[r, o, 3] = nx, -1, ny, -1
+        if flags[r, _SKIP] == 0:
+            body[r, o, _CX] = centre[r, o, 0]
+            body[r, o, _CY] = centre[r, o, 1]
+            for m in ti.static(range(3)):
+                body[r, o, _MOB + m] = mobility[r, o, m]
+            box[r, o, 0], box[r, o, 1], box[r, o, 2], box[r, o, 3] = nx, -1, ny, -1
     for r, i, j in ti.ndrange(R, nx, ny):
-        o = owner[r, i, j]
+        o = -1
+        if flags[r, _SKIP] == 0:
+            o = owner[r, i, j]
         if o >= 0:
             ti.atomic_min(box[r, o, 0], i)
             ti.atomic_max(box[r, o, 1], i)

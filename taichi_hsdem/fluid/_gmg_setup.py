@@ -16,6 +16,15 @@ from ._gmg_cycle import (REAL, _BAD, _BASE, _CHANGED, _INLET, _K_DX, _K_DY, _K_G
 
 # ---------------------------------------------------------------- helpers
 @ti.func
+def _built(flags: ti.template(), r, every):
+    """Whether the operators of realization r are built: all (``every``), or
+    those whose kappa _scan found changed. The same kappa (and the unknowns made
+    from it) builds the same operator to the bit, so an unchanged realization
+    keeps the one it has."""
+    return every != 0 or flags[r, _CHANGED] != 0
+
+
+@ti.func
 def _harmonic(k1, k2):
     h = ti.cast(0.0, REAL.dtype)
     if k1 + k2 > 0:
@@ -106,8 +115,9 @@ def _scan(kappa: _Grid, seen: _Rows, connected: _Mask, flags: _Ints):
 
 @ti.kernel
 def _assemble(kappa: _Grid, unknown: _Cells, sides: _Sides, op: _Ops, cg: _Rows,
-              state: _Rows, geo: _Ints, consts: _Consts):
-    """Fine-level operator and the kappa-dependent right-hand side.
+              state: _Rows, geo: _Ints, consts: _Consts, flags: _Ints, every: ti.i32):
+    """Fine-level operator and the kappa-dependent right-hand side, of every
+    realization (``every``) or of those whose kappa changed (_built).
 
     ``consts``: ``gx = dy / (dx eta)``, ``gy = dx / (dy eta)``, the inflow;
     ``sides[s, m] = (g, v)``: the
@@ -117,15 +127,19 @@ def _assemble(kappa: _Grid, unknown: _Cells, sides: _Sides, op: _Ops, cg: _Rows,
     """
     R, nx, ny = kappa.shape[0], kappa.shape[1], kappa.shape[2]
     for r in range(R):
-        total = ti.cast(0.0, REAL.dtype)
-        for j in range(ny):
-            if unknown[r, 0, j] != 0:
-                total += ti.cast(kappa[r, 0, j], REAL.dtype)
-        state[r, _INLET] = total
+        if _built(flags, r, every):
+            total = ti.cast(0.0, REAL.dtype)
+            for j in range(ny):
+                if unknown[r, 0, j] != 0:
+                    total += ti.cast(kappa[r, 0, j], REAL.dtype)
+            state[r, _INLET] = total
     for t in range(R * (nx + 1)):
         r, i = t // (nx + 1), t % (nx + 1) - 1  # i = -1: the west ghost column
         gx, gy, inflow = consts[_K_GX], consts[_K_GY], consts[_K_INFLOW]
-        for j in range(ny + 1):
+        rows = ny + 1
+        if not _built(flags, r, every):
+            rows = 0
+        for j in range(rows):
             c = ti.Vector([0.0, 0.0], dt=REAL.dtype)
             base = ti.cast(0.0, REAL.dtype)
             if j == ny:  # the ghost below column i + 1: its bottom Dirichlet face
@@ -162,21 +176,22 @@ def _assemble(kappa: _Grid, unknown: _Cells, sides: _Sides, op: _Ops, cg: _Rows,
 
 
 @ti.kernel
-def _coarsen(op: _Ops, geo: _Ints, l: ti.i32, R: ti.i32):
-    mx, my = geo[l + 1, _NX], geo[l + 1, _NY]
+def _coarsen(op: _Ops, geo: _Ints, flags: _Ints, l: ti.i32, every: ti.i32):
+    R, mx, my = flags.shape[0], geo[l + 1, _NX], geo[l + 1, _NY]
     for t in range(R * (mx + 1)):
         r, I = t // (mx + 1), t % (mx + 1) - 1
-        for J in range(my + 1):
-            _coarsen_entry(op, geo, l, r, I, J)
+        if _built(flags, r, every):
+            for J in range(my + 1):
+                _coarsen_entry(op, geo, l, r, I, J)
 
 
 @ti.kernel
-def _factor(op: _Ops, chol: _Chol, geo: _Ints, l: ti.i32):
-    """Dense Cholesky factor (lower) of each realization's coarsest operator; a
-    cell that is no unknown gets an identity row."""
+def _factor(op: _Ops, chol: _Chol, geo: _Ints, flags: _Ints, l: ti.i32, every: ti.i32):
+    """Dense Cholesky factor (lower) of each realization's coarsest operator (see
+    _built); a cell that is no unknown gets an identity row."""
     R, nx, ny = chol.shape[0], geo[l, _NX], geo[l, _NY]
     for t in range(R * _TASK):
-        if t % _TASK == 0:
+        if t % _TASK == 0 and _built(flags, t // _TASK, every):
             _factor_of(op, chol, geo, l, t // _TASK, nx, ny)
 
 

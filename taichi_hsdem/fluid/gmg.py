@@ -440,11 +440,18 @@ class TaichiPressureSolver:
 
     def _build(self, k_dev, changed, zeros):
         """The cut-off cells of the realizations whose zeros may have moved (given
-        ``changed`` and ``zeros``), then the operators (every realization's)."""
+        ``changed`` and ``zeros``), then their operators (``changed`` None: every
+        realization's): the fine one from kappa, the Galerkin levels below, the
+        coarse factor."""
         t_setup = time.perf_counter()
+        every = int(changed is None)
         if changed is not None:
             self._cut_off(k_dev, changed, zeros)
-        self._build_operators(k_dev)
+        _assemble(k_dev, self._unknown, self._sides_dev, self._op, self._cg, self._state,
+                  self._geo, self._consts, self._flags, every)
+        for l in range(len(self.levels) - 1):
+            _coarsen(self._op, self._geo, self._flags, l, every)
+        _factor(self._op, self._chol, self._geo, self._flags, len(self.levels) - 1, every)
         self._stats["setup_seconds"] += time.perf_counter() - t_setup
 
     def _solve_system(self, x0, carried, occupied, bodies, k_dev):
@@ -534,14 +541,6 @@ class TaichiPressureSolver:
         self._had_zeros[changed] = zeros[changed]
         self._unknown.from_numpy(self._unknown_host.astype(np.int8))
 
-    def _build_operators(self, k_dev):
-        """Fine operator from kappa, the Galerkin levels below, the coarse factor."""
-        _assemble(k_dev, self._unknown, self._sides_dev, self._op, self._cg, self._state,
-                  self._geo, self._consts)
-        for l in range(len(self.levels) - 1):
-            _coarsen(self._op, self._geo, l, self.n_batch)
-        _factor(self._op, self._chol, self._geo, len(self.levels) - 1)
-
     def _set_rhs(self, carried, occupied):
         if self._bodies is not None:
             self._set_body_rhs(self._bodies)
@@ -580,7 +579,7 @@ class TaichiPressureSolver:
                                     body=ti.ndarray(self.real, (R, n, BODY_COLUMNS)),
                                     box=ti.ndarray(ti.i32, (R, n, 4)))
         _body_rhs(self._cg, t, bodies.centre, bodies.mobility, bodies.drift, self._geo,
-                  self._consts)
+                  self._consts, self._flags)
 
     def _body_args(self):
         """(whether the bodies' terms apply, their pack) for the CG kernels."""
