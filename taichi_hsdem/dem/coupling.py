@@ -261,12 +261,15 @@ def pressure_forces(bodies: _HELD, running: ti.types.ndarray(), which: ti.types.
 
 
 @ti.kernel
-def finite_or_zero(src: ti.types.ndarray(), dst: ti.types.ndarray()):
+def finite_or_zero(src: ti.types.ndarray(), dst: ti.types.ndarray(),
+                   frozen: ti.types.ndarray()):
     """``dst = src`` in the kernels' precision, 0 where ``src`` is not finite (the
-    walls and cut-off cells, which hold NaN)."""
+    walls and cut-off cells, which hold NaN), but for realizations ``frozen``
+    (their pressure as it was)."""
     for I in ti.grouped(src):
-        value = src[I]
-        dst[I] = 0.0 if ti.math.isnan(value) or ti.math.isinf(value) else value
+        if frozen[I[0]] == 0:
+            value = src[I]
+            dst[I] = 0.0 if ti.math.isnan(value) or ti.math.isinf(value) else value
 
 
 @ti.kernel
@@ -508,7 +511,7 @@ class FluidCoupling:
                                            carried=carried, occupied=occupied, host=False,
                                            bodies=terms, only=only)
             self._pressure_device, self._pressure = pres, None
-            finite_or_zero(pres, self.pres)
+            finite_or_zero(pres, self.pres, self.frozen)
         else:
             pres, info = self.solver.solve(kappa, carried=carried, occupied=occupied)
             self._pressure = pres

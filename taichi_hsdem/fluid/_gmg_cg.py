@@ -434,13 +434,18 @@ def _solve_one(op: ti.template(), mg: ti.template(), cg: ti.template(), part: ti
 
 # ---------------------------------------------------------------- output kernels
 @ti.kernel
-def _pressure(cg: _Rows, unknown: _Cells, out: _Field, geo: _Ints, consts: _Consts):
-    """The pressure, NaN in cells without one."""
+def _pressure(cg: _Rows, unknown: _Cells, out: _Field, geo: _Ints, consts: _Consts,
+              flags: _Ints):
+    """The pressure, NaN in cells without one; a realization left out of the
+    solve (flag _SKIP) keeps the one it has, from the same solution."""
     R, nx, ny = unknown.shape[0], geo[0, _NX], geo[0, _NY]
     nan = ti.cast(ti.math.nan, REAL.dtype)
     for t in range(R * nx):
         r, i = t // nx, t % nx
-        for j in range(ny):
+        rows = ny
+        if flags[r, _SKIP] != 0:
+            rows = 0
+        for j in range(rows):
             p = nan
             if unknown[r, i, j] != 0:
                 p = cg[_SOL, _index(geo, 0, r, i, j)] + consts[_K_PREF]

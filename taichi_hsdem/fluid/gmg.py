@@ -359,11 +359,11 @@ class TaichiPressureSolver:
         ``bodies`` (:class:`BodyTerms`, not with ``carried``) the moving bodies
         carry their volume implicitly: the pressure and their velocities over
         the next interval are solved together (:mod:`._gmg_bodies`). With
-        ``only`` (bool, (R,)) the realizations outside it are not iterated: CG
-        leaves their solution as the last solve left it (0 iterations), as a
-        solve of a system that has not changed since that one converged would.
-        Leave out only such realizations: the flux check and the pressure are
-        still computed from each one's solution and present kappa.
+        ``only`` (bool, (R,)) the realizations outside it are not set up nor
+        iterated: CG leaves their solution and pressure as the last solve left
+        them (0 iterations), as a solve of a system that has not changed since
+        that one converged would. Leave out only such realizations: the flux
+        check is still computed from each one's solution and present kappa.
 
         Returns
         -------
@@ -477,7 +477,7 @@ class TaichiPressureSolver:
         for r in np.flatnonzero(np.abs(flux_in - flux_out) > limit):
             raise FluxImbalanceError(int(r), float(flux_in[r]), float(flux_out[r]),
                                      float(limit[r]), self.tol)
-        _pressure(self._cg, self._unknown, self._out, self._geo, self._consts)
+        _pressure(self._cg, self._unknown, self._out, self._geo, self._consts, self._flags)
         self._stats["solves"] += 1
         self._stats["iterations"] += iterations
         self._stats["rebuilds"] += int(np.sum(changed))
