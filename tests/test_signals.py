@@ -39,6 +39,25 @@ def _python(code: str, tmp_path: Path) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=300)
 
 
+def _build_swallowing(name: str) -> str:
+    """Code that makes runner.build raise signal ``name`` in a ``try`` whose bare
+    ``except`` swallows the stop, as Taichi's decorators do while they inspect
+    their caller."""
+    return textwrap.dedent(f"""
+        import os, signal, time
+        from taichi_hsdem import runner
+        build = runner.build
+        def build_swallowing_a_signal(*args, **kwargs):
+            try:                                  # as taichi.lang.kernel_impl does
+                os.kill(os.getpid(), signal.{name})
+                time.sleep(5)
+            except:
+                pass
+            return build(*args, **kwargs)
+        runner.build = build_swallowing_a_signal
+        """)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["TERM", "HUP"])
 def test_a_signal_during_the_run_keeps_results_and_a_checkpoint(tmp_path, sig):
     out = tmp_path / "run"
@@ -236,22 +255,13 @@ def test_a_set_up_signal_a_library_swallows_still_stops_the_run(tmp_path):
     still stop before it starts, as during set-up (a run of 50 s went on to its end
     with exit 0 before)."""
     out = tmp_path / "o"
-    proc = _python(f"""
-        import os, signal, sys, time
-        from taichi_hsdem import cli, runner
-        build = runner.build
-        def build_swallowing_a_signal(*args, **kwargs):
-            try:                                  # as taichi.lang.kernel_impl does
-                os.kill(os.getpid(), signal.SIGHUP)
-                time.sleep(5)
-            except:
-                pass
-            return build(*args, **kwargs)
-        runner.build = build_swallowing_a_signal
+    proc = _python(_build_swallowing("SIGHUP") + textwrap.dedent(f"""
+        import sys
+        from taichi_hsdem import cli
         sys.argv = ["taichi_hsdem", {HOURGLASS!r}, "--out", {str(out)!r},
                     "--set", "run.t_end=50", "--quiet"]
         sys.exit(cli.main())
-        """, tmp_path)
+        """), tmp_path)
     assert proc.returncode == 129, proc.stderr
     assert proc.stderr.strip() == "stopped by SIGHUP during set-up: nothing was written"
     assert not out.exists()
@@ -268,25 +278,15 @@ def test_a_signal_a_library_swallows_in_a_studys_point_still_stops_the_study(tmp
                           '"run.t_end" = 5000\n"run.stop_at_clog" = false\n'
                           '[grid]\n"particles.friction" = [0.2, 0.4]\n')
     out = tmp_path / "sweep"
-    proc = _python(f"""
-        import os, signal, sys, time
-        from taichi_hsdem import runner, stop
+    proc = _python(_build_swallowing("SIGTERM") + textwrap.dedent(f"""
+        import signal, sys
+        from taichi_hsdem import cli, stop
         stop.keep_swallowed_stops()
         for s in (signal.SIGINT, signal.SIGTERM):
             signal.signal(s, stop.raise_stop)      # as python -m taichi_hsdem does
-        build = runner.build
-        def build_swallowing_a_signal(*args, **kwargs):
-            try:                                  # as taichi.lang.kernel_impl does
-                os.kill(os.getpid(), signal.SIGTERM)
-                time.sleep(5)
-            except:
-                pass
-            return build(*args, **kwargs)
-        runner.build = build_swallowing_a_signal
-        from taichi_hsdem import cli
         sys.exit(cli.main(["sweep", {str(sweep_file)!r}, "--out", {str(out)!r},
                            "--quiet"]))
-        """, tmp_path)
+        """), tmp_path)
     assert proc.returncode == 143, proc.stderr
     assert proc.stderr.strip().splitlines() == [
         "sweep stopped by SIGTERM: what finished before is kept (a rerun into the same "
