@@ -442,14 +442,12 @@ def _pressure(cg: _Rows, unknown: _Cells, out: _Field, geo: _Ints, consts: _Cons
     nan = ti.cast(ti.math.nan, REAL.dtype)
     for t in range(R * nx):
         r, i = t // nx, t % nx
-        rows = ny
-        if flags[r, _SKIP] != 0:
-            rows = 0
-        for j in range(rows):
-            p = nan
-            if unknown[r, i, j] != 0:
-                p = cg[_SOL, _index(geo, 0, r, i, j)] + consts[_K_PREF]
-            out[r, i, j] = p
+        if flags[r, _SKIP] == 0:
+            for j in range(ny):
+                p = nan
+                if unknown[r, i, j] != 0:
+                    p = cg[_SOL, _index(geo, 0, r, i, j)] + consts[_K_PREF]
+                out[r, i, j] = p
 
 
 @ti.kernel

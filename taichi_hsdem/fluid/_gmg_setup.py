@@ -136,43 +136,41 @@ def _assemble(kappa: _Grid, unknown: _Cells, sides: _Sides, op: _Ops, cg: _Rows,
     for t in range(R * (nx + 1)):
         r, i = t // (nx + 1), t % (nx + 1) - 1  # i = -1: the west ghost column
         gx, gy, inflow = consts[_K_GX], consts[_K_GY], consts[_K_INFLOW]
-        rows = ny + 1
-        if not _built(flags, r, every):
-            rows = 0
-        for j in range(rows):
-            c = ti.Vector([0.0, 0.0], dt=REAL.dtype)
-            base = ti.cast(0.0, REAL.dtype)
-            if j == ny:  # the ghost below column i + 1: its bottom Dirichlet face
-                if i + 1 < nx:  # noqa: SIM102 - Taichi's `and` does not short-circuit
-                    if unknown[r, i + 1, 0] != 0:
-                        c[_TY] = sides[2, i + 1][0] * ti.cast(kappa[r, i + 1, 0], REAL.dtype)
-            elif i < 0:  # the west ghost: the left Dirichlet face of cell (0, j)
-                if unknown[r, 0, j] != 0:
-                    c[_TX] = sides[0, j][0] * ti.cast(kappa[r, 0, j], REAL.dtype)
-            elif unknown[r, i, j] != 0:
-                k = ti.cast(kappa[r, i, j], REAL.dtype)
-                c[_TX] = sides[1, j][0] * k  # on the last column, its right face
-                if i + 1 < nx:
-                    c[_TX] = 0.0
-                    if unknown[r, i + 1, j] != 0:
-                        c[_TX] = gx * _harmonic(k, ti.cast(kappa[r, i + 1, j], REAL.dtype))
-                c[_TY] = sides[3, i][0] * k  # on the top row, its top face
-                if j + 1 < ny:
-                    c[_TY] = 0.0
-                    if unknown[r, i, j + 1] != 0:
-                        c[_TY] = gy * _harmonic(k, ti.cast(kappa[r, i, j + 1], REAL.dtype))
-                gv = ti.cast(0.0, REAL.dtype)
-                for side in ti.static(range(4)):
-                    on_side = (i == 0, i == nx - 1, j == 0, j == ny - 1)[side]
-                    m = (j, j, i, i)[side]
-                    if on_side:
-                        gv += sides[side, m][0] * sides[side, m][1]
-                base = k * gv
-                if i == 0 and state[r, _INLET] > 0:
-                    base += inflow * k / state[r, _INLET]
-            op[_index(geo, 0, r, i, j)] = c
-            if i >= 0 and j < ny:
-                cg[_BASE, _index(geo, 0, r, i, j)] = base
+        if _built(flags, r, every):
+            for j in range(ny + 1):
+                c = ti.Vector([0.0, 0.0], dt=REAL.dtype)
+                base = ti.cast(0.0, REAL.dtype)
+                if j == ny:  # the ghost below column i + 1: its bottom Dirichlet face
+                    if i + 1 < nx:  # noqa: SIM102 - Taichi's `and` does not short-circuit
+                        if unknown[r, i + 1, 0] != 0:
+                            c[_TY] = sides[2, i + 1][0] * ti.cast(kappa[r, i + 1, 0], REAL.dtype)
+                elif i < 0:  # the west ghost: the left Dirichlet face of cell (0, j)
+                    if unknown[r, 0, j] != 0:
+                        c[_TX] = sides[0, j][0] * ti.cast(kappa[r, 0, j], REAL.dtype)
+                elif unknown[r, i, j] != 0:
+                    k = ti.cast(kappa[r, i, j], REAL.dtype)
+                    c[_TX] = sides[1, j][0] * k  # on the last column, its right face
+                    if i + 1 < nx:
+                        c[_TX] = 0.0
+                        if unknown[r, i + 1, j] != 0:
+                            c[_TX] = gx * _harmonic(k, ti.cast(kappa[r, i + 1, j], REAL.dtype))
+                    c[_TY] = sides[3, i][0] * k  # on the top row, its top face
+                    if j + 1 < ny:
+                        c[_TY] = 0.0
+                        if unknown[r, i, j + 1] != 0:
+                            c[_TY] = gy * _harmonic(k, ti.cast(kappa[r, i, j + 1], REAL.dtype))
+                    gv = ti.cast(0.0, REAL.dtype)
+                    for side in ti.static(range(4)):
+                        on_side = (i == 0, i == nx - 1, j == 0, j == ny - 1)[side]
+                        m = (j, j, i, i)[side]
+                        if on_side:
+                            gv += sides[side, m][0] * sides[side, m][1]
+                    base = k * gv
+                    if i == 0 and state[r, _INLET] > 0:
+                        base += inflow * k / state[r, _INLET]
+                op[_index(geo, 0, r, i, j)] = c
+                if i >= 0 and j < ny:
+                    cg[_BASE, _index(geo, 0, r, i, j)] = base
 
 
 @ti.kernel
