@@ -30,7 +30,7 @@ import warnings
 import numpy as np
 
 from . import backend, observables
-from .dem import contact, coupling, fused, integrate, order, state
+from .dem import contact, coupling, fused, integrate, state
 from .layout import BAD_FAST, BAD_NAN, BAD_PASSED, F_HISTORY_OVERFLOW, F_REBUILD
 from .dem.neighbors import STALL_BUILDS, STALL_RUNNING, STALL_STEP, NeighborList
 from .geometry.placement import PlacementError, place
@@ -117,9 +117,6 @@ class Simulation:
         if self.fused:
             self.done = state.array(np.zeros(R, dtype=np.int32), state.ti.i32)
             self.builds = state.array(np.zeros(R, dtype=np.int32), state.ti.i32)
-            # one realization of many bodies steps them in cell order (dem/order.py)
-            self._order = (order.CellOrder(N, self.particles, self.history, self.neighbors)
-                           if R == 1 and N >= order.MIN_BODIES else order.Numbered(N))
         #: Whether the per-step path rebuilds the neighbour lists on the device
         #: (NeighborList.rebuild_if_flagged, a GPU's way: no host read per step)
         #: or when the host has read the rebuild flag after a step (the CPU's).
@@ -321,7 +318,7 @@ class Simulation:
         fused.run_steps(k, self.bodies, self.batch, self.particles, self.materials,
                         self.templates, self.walls, self.history, self.neighbors, self.flags,
                         self.done, self.builds, self.dt, m.x_escape, not m.all_disks,
-                        self.scene.contact.normalize_by_nodes, self._order)
+                        self.scene.contact.normalize_by_nodes)
 
     def _step_per_body(self, n: int):
         """``n`` steps, three kernels each (four on a GPU). On the CPU the host

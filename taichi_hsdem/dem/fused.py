@@ -98,7 +98,7 @@ def steps(n_steps: ti.i32, bodies: Bodies.Pack, batch: _BATCH,
           particles: Particles.Pack, materials: _MATERIALS, templates: _TEMPLATES,
           walls: WallGrid.Pack, history: ShearHistory.Pack, neighbors: NEIGHBORS,
           flags: ti.types.ndarray(), done: ti.types.ndarray(), builds: ti.types.ndarray(),
-          key: ti.types.ndarray(), slots: ti.template(), law: ti.template(), dt: float,
+          slots: ti.template(), law: ti.template(), dt: float,
           x_escape: float):
     """Advance every running realization by up to ``n_steps`` steps.
 
@@ -108,8 +108,7 @@ def steps(n_steps: ti.i32, bodies: Bodies.Pack, batch: _BATCH,
     latest shear history ends in buffer ``a`` (the pack's ``old`` pair) when
     ``n_steps`` is even, else ``b`` (``new``), for every realization (one that
     stopped early, or did not run, is copied there), so that the host swaps the
-    two buffers of the whole batch. ``key[j]``: the number of body ``j``, the
-    order of every neighbour list (:mod:`.order`).
+    two buffers of the whole batch.
     """
     hp_a, hs_a = ti.static(history.partners_old, history.shear_old)
     hp_b, hs_b = ti.static(history.partners_new, history.shear_new)
@@ -144,7 +143,7 @@ def steps(n_steps: ti.i32, bodies: Bodies.Pack, batch: _BATCH,
                     if bin_one(bodies, batch, neighbors, flags, r):
                         stop = 1
                     for i in range(n_part):
-                        if list_one(bodies, batch, particles, neighbors, flags, key, r,
+                        if list_one(bodies, batch, particles, neighbors, flags, r,
                                     i) > neighbors.nbr.shape[2]:
                             stop = 1
             done[r] = -1 if batch.bad[r] != 0 or batch.running[r] == 0 else s
@@ -162,17 +161,14 @@ def steps(n_steps: ti.i32, bodies: Bodies.Pack, batch: _BATCH,
 
 def run_steps(n: int, bodies, batch, particles, materials, templates, walls, history,
               neighbors, flags, done, builds, dt: float, x_escape: float, level_set: bool,
-              normalize: bool, order):
+              normalize: bool):
     """``n`` steps of every running realization in one launch (module doc); leaves
     the latest shear history in ``history.old``. ``level_set``: the node law of
     level-set shapes (``normalize``: ``contact.normalize_by_nodes``), else the
-    analytic disks'. ``order``: :class:`.order.Numbered`, or :class:`.order.CellOrder`
-    to step the bodies in cell order."""
-    b, p, h, nl, key = order.enter(bodies, particles, history, neighbors, builds)
-    steps(n, b.pack(), batch.pack_of(_BATCH), p.pack(), materials.pack_of(_MATERIALS),
+    analytic disks'."""
+    steps(n, bodies.pack(), batch.pack_of(_BATCH), particles.pack(), materials.pack_of(_MATERIALS),
           templates.pack_of(_TEMPLATES),
-          walls.pack(), h.pack(), nl.pack(), flags, done, builds, key, h.slots,
+          walls.pack(), history.pack(), neighbors.pack(), flags, done, builds, history.slots,
           (NODES_NORMALIZED if normalize else NODES) if level_set else DISKS, dt, x_escape)
     if n % 2:
-        h.swap()   # every realization's latest history is now history.old
-    order.leave(bodies, history, neighbors, builds)
+        history.swap()   # every realization's latest history is now history.old

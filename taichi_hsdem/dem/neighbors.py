@@ -96,7 +96,7 @@ def _rebuild(bodies: ti.template(), batch: ti.template(), particles: ti.template
             _bin_body(bodies, batch, neighbors, flags, r, i)
     for r, i in ti.ndrange(R, N):
         if _go(flags, stall, gated):
-            list_one(bodies, batch, particles, neighbors, flags, None, r, i)
+            list_one(bodies, batch, particles, neighbors, flags, r, i)
 
 
 @ti.kernel
@@ -161,29 +161,14 @@ def build_neighbors(bodies: Bodies.Pack, batch: Batch.Pack, particles: Particles
                     neighbors: NEIGHBORS, flags: ti.types.ndarray()):
     for r, i in ti.ndrange(bodies.x.shape[0], bodies.x.shape[1]):
         # (the count it returns is for the fused stepper)
-        list_one(bodies, batch, particles, neighbors, flags, None, r, i)
-
-
-def _keyed(key) -> bool:
-    return key is not None
-
-
-@ti.func
-def _number(key: ti.template(), j):
-    """The number by which body ``j`` is listed: its index, or ``key[j]``."""
-    out = j
-    if ti.static(_keyed(key)):
-        out = key[j]
-    return out
+        list_one(bodies, batch, particles, neighbors, flags, r, i)
 
 
 @ti.func
 def list_one(bodies: ti.template(), batch: ti.template(), particles: ti.template(),
-             neighbors: ti.template(), flags: ti.template(), key: ti.template(), r, i):
+             neighbors: ti.template(), flags: ti.template(), r, i):
     """Neighbour list of body ``i`` of realization ``r`` from the binned cells;
-    returns how many neighbours it found (more than the capacity: overflow).
-    The list is sorted by index, or by ``key[j]`` (not None: the number of body
-    ``j`` of bodies in another order, :mod:`.order`)."""
+    returns how many neighbours it found (more than the capacity: overflow)."""
     cap = neighbors.nbr.shape[2]
     ccap = neighbors.cell_p.shape[2]
     ncx = neighbors.cell_shape[0]
@@ -209,8 +194,7 @@ def list_one(bodies: ti.template(), batch: ti.template(), particles: ti.template
                             # are summed must not depend on when (or, batched, why)
                             # the list was built.
                             slot = count
-                            while slot > 0 and (_number(key, neighbors.nbr[r, i, slot - 1])
-                                                > _number(key, j)):
+                            while slot > 0 and neighbors.nbr[r, i, slot - 1] > j:
                                 neighbors.nbr[r, i, slot] = neighbors.nbr[r, i, slot - 1]
                                 slot -= 1
                             neighbors.nbr[r, i, slot] = j
@@ -254,9 +238,6 @@ class NeighborList(Bundle):
         self._alloc_nbr()
         self.x_ref = ti.Vector.ndarray(2, backend.real(), shape=self.shape)
         self.builds = 0
-        #: Counts the host's writes of the lists (a build, new capacities): a
-        #: copy of them (dem/order.py) is current while it stays the same.
-        self.generation = 0
         self._no_stall = array(np.zeros(1), ti.i32)  # rebuild_each's (unread) record
 
     @property
@@ -268,7 +249,6 @@ class NeighborList(Bundle):
         """Allocate the cell and neighbour lists anew at these capacities (a
         checkpoint's), empty: their contents are to be set or rebuilt."""
         self.cell_cap, self.nbr_cap = int(cell_cap), int(nbr_cap)
-        self.generation += 1
         self._alloc_cells()
         self._alloc_nbr()
 
@@ -309,5 +289,4 @@ class NeighborList(Bundle):
                 self._alloc_nbr()
                 continue
             self.builds += 1
-            self.generation += 1
             return
