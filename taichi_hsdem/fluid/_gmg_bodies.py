@@ -289,10 +289,19 @@ def _body_rhs(cg: _Rows, terms: Terms, centre: _Field, mobility: _Field, drift: 
                 terms.body[r, o, _Z + m] = (drift[r, o, m] + terms.body[r, o, _MOB + m]
                                             * terms.body[r, o, _Y + m])
     nx, ny = geo[0, _NX], geo[0, _NY]
-    for r, i, j in ti.ndrange(R, nx, ny):
+    for t in range(R * nx):  # a thread per grid column: RHS = BASE (0 + it, as below)
+        r, i = t // nx, t % nx
         if flags[r, _SKIP] == 0:
-            cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(
-                cg, _BASE, terms, geo, consts[_K_DX], consts[_K_DY], r, i, j)
+            first = _index(geo, 0, r, i, 0)
+            for j in range(ny):
+                cg[_RHS, first + j] = ti.cast(0.0, REAL.dtype) + cg[_BASE, first + j]
+    for r, o in ti.ndrange(R, N):  # + S z where it is not 0: the bodies' rings
+        if flags[r, _SKIP] == 0:
+            b = ring(terms, geo, r, o)
+            for i in range(b[0], b[1]):
+                for j in range(b[2], b[3]):
+                    cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(
+                        cg, _BASE, terms, geo, consts[_K_DX], consts[_K_DY], r, i, j)
 
 
 @ti.func
