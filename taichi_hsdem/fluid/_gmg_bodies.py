@@ -209,7 +209,7 @@ def _product_of(cg: ti.template(), src, dst, terms: ti.template(), geo: ti.templ
         for j in range(geo[0, _NY]):
             cg[dst, first + j] = 0.0
     for o in range(terms.body.shape[1]):
-        _spread_box(cg, dst, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
+        _spread_box(cg, dst, -1, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
 
 
 @ti.func
@@ -235,15 +235,16 @@ def ring(terms: ti.template(), geo: ti.template(), r, o):
 
 
 @ti.func
-def _spread_box(cg: ti.template(), dst, terms: ti.template(), geo: ti.template(), dx, dy, r,
-                o):
-    """``cg[dst] = S z`` at the cells of body o's :func:`ring`; a cell in two
-    rings gets the same value twice (:func:`_spread_cell` sums all of its faces).
-    The rest of ``cg[dst]`` is 0, set beforehand."""
+def _spread_box(cg: ti.template(), dst, base, terms: ti.template(), geo: ti.template(), dx,
+                dy, r, o):
+    """``cg[dst] = cg[base] + S z`` (``base < 0``: ``S z``) at the cells of body
+    o's :func:`ring`; a cell in two rings gets the same value twice
+    (:func:`_spread_cell` sums all of its faces). The rest of ``cg[dst]`` is set
+    beforehand (0, or ``0 + cg[base]``)."""
     b = ring(terms, geo, r, o)
     for i in range(b[0], b[1]):
         for j in range(b[2], b[3]):
-            cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, -1, terms, geo, dx, dy, r,
+            cg[dst, _index(geo, 0, r, i, j)] = _spread_cell(cg, base, terms, geo, dx, dy, r,
                                                             i, j)
 
 
@@ -269,7 +270,7 @@ def _product(cg: ti.template(), src, dst, flags: ti.template(), running, terms: 
                 cg[dst, first + j] = 0.0
     for r, o in ti.ndrange(R, N):  # a cell in two bodies' boxes gets one value twice
         if flags[r, running]:
-            _spread_box(cg, dst, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
+            _spread_box(cg, dst, -1, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
 
 
 @ti.kernel
@@ -297,11 +298,7 @@ def _body_rhs(cg: _Rows, terms: Terms, centre: _Field, mobility: _Field, drift: 
                 cg[_RHS, first + j] = ti.cast(0.0, REAL.dtype) + cg[_BASE, first + j]
     for r, o in ti.ndrange(R, N):  # + S z where it is not 0: the bodies' rings
         if flags[r, _SKIP] == 0:
-            b = ring(terms, geo, r, o)
-            for i in range(b[0], b[1]):
-                for j in range(b[2], b[3]):
-                    cg[_RHS, _index(geo, 0, r, i, j)] = _spread_cell(
-                        cg, _BASE, terms, geo, consts[_K_DX], consts[_K_DY], r, i, j)
+            _spread_box(cg, _RHS, _BASE, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
 
 
 @ti.func

@@ -252,7 +252,7 @@ def _lane_product(cg: ti.template(), lcg: ti.template(), src, terms: ti.template
                                                              q)
             gathers_of(cg, src, terms, geo, consts, r)
             for o in range(terms.body.shape[1]):
-                _spread_box(cg, _PW, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
+                _spread_box(cg, _PW, -1, terms, geo, consts[_K_DX], consts[_K_DY], r, o)
             for o in range(terms.body.shape[1]):
                 b = ring(terms, geo, r, o)
                 for i, j in ti.ndrange((b[0], b[1]), (b[2], b[3])):
